@@ -1,0 +1,26 @@
+#pragma once
+// The single entry point of the mesher: Lu & Yun's L-infinity split-merge triangulation.
+#include "core/mesh.hpp"
+
+namespace tb::core {
+
+struct TriangulateOptions {
+    double eps = 1.0;          // vertical bound, same unit as the heights; > 0 and finite
+    bool lock_border = true;   // border vertices = optimal 1-D fit of each border (crack-free tiles)
+};
+
+// Contract: grid is at least 2x2, heights finite wherever valid (and finite everywhere: callers
+// fill nodata before meshing), eps > 0 and finite; otherwise throws tb::InputError naming the
+// problem. On return every valid sample lies within eps of the mesh (checked exactly; a
+// violation throws tb::Error), the triangles tile the rectangle exactly once, counter-clockwise,
+// with no T-junction, and the result is deterministic bit for bit.
+Mesh triangulate(const HeightGrid& grid, const TriangulateOptions& options);
+
+// Largest |mesh - height| over the valid samples, by exact point location (the guarantee check).
+double max_error(const Mesh& mesh, const HeightGrid& grid);
+
+// Verifies twin symmetry, CCW orientation, no zero-area triangle, border edges on the grid
+// boundary, and that the triangles' total area equals (W-1)(H-1). Throws tb::Error on failure.
+void check_mesh(const Mesh& mesh, int width, int height);
+
+}  // namespace tb::core
