@@ -49,9 +49,10 @@ public:
     virtual TileRange tiles_at(int z) const = 0;       // tiles of zoom z that may hold data
     virtual bool may_have_tile(const TileId& id) const = 0;
 
-    // tileset.json (3D Tiles 1.1) for this layer; content URIs are relative:
-    // "{z}/{x}/{y}.glb" next to tileset.json.
-    virtual std::string tileset_json() const = 0;
+    // The layer's tileset documents by relative path: "tileset.json" (3D Tiles 1.1; content URIs
+    // are relative: "{z}/{x}/{y}.glb" next to it) and any external tileset or subtree it refers
+    // to. Returns false when the path names no document.
+    virtual bool document(const std::string& path, std::string& out) const = 0;
 
     // The encoded tile. Throws InputError for an id outside the scheme or an unknown eps level,
     // NotFound when the tile holds no data. Safe to call from many threads at once.

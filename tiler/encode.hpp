@@ -1,0 +1,47 @@
+#pragma once
+// Encoding a meshed tile: glTF 2.0 + KHR_draco_mesh_compression (.glb) and raw Draco (.drc),
+// and the layer's 3D Tiles 1.1 tileset. Draco is included only in tiler/draco_*.cpp.
+#include "core/mesh.hpp"
+#include "tiler/format.hpp"
+#include "tiler/tile_raster.hpp"
+
+#include <functional>
+#include <string>
+
+namespace tb::tiler {
+
+// How a tile's published eps is split between the mesher and Draco's quantization.
+// The quantization lattice is fixed per eps (so per level): every tile of the level snaps
+// vertices to the same lattice and a shared border vertex decodes identically in both tiles.
+struct ErrorBudget {
+    double eps = 0;          // published bound, metres: decoded mesh vs every valid sample
+    double quant_step = 0;   // lattice step of the Draco position quantization, metres
+    double quant_error = 0;  // worst vertical displacement quantization can cause, metres
+    double mesh_eps = 0;     // eps handed to core::triangulate = eps - quant_error (> 0)
+};
+ErrorBudget error_budget(double eps);
+
+// Encodes `mesh` (meshed from `raster` at budget.mesh_eps) as `format`. Throws tb::Error if
+// Draco fails.
+std::string encode_tile(const TileRaster& raster,
+                        const core::Mesh& mesh,
+                        Format format,
+                        const ErrorBudget& budget);
+
+// What the tileset writer needs to know about a layer.
+struct TilesetSpec {
+    std::string layer;
+    Scheme scheme = Scheme::Geodetic;
+    int min_zoom = 0, max_zoom = 0;
+    LonLatBox data_bounds;
+    double min_height = 0, max_height = 0;  // ellipsoidal metres over the whole layer
+    std::function<double(int)> eps_for_zoom;
+    std::function<bool(const TileId&)> has_tile;  // exactly the tiles that make_tile produces
+};
+
+// The layer's documents, by path relative to the layer's URL root: "tileset.json" always,
+// plus whatever else the chosen tileset layout needs (external tilesets or subtrees).
+// Returns false when `path` names no document of this layer.
+bool tileset_document(const TilesetSpec& spec, const std::string& path, std::string& out);
+
+}  // namespace tb::tiler
