@@ -2,6 +2,7 @@
 #include "core/error.hpp"
 #include "server/commands.hpp"
 #include "tiler/gdal_source.hpp"
+#include "tiler/layer.hpp"
 
 #include <cmath>
 #include <cstdio>
@@ -60,27 +61,69 @@ std::string describe(const tiler::DemInfo& d) {
     return out.str();
 }
 
+// The pyramid a layer of this DEM would have: zooms, tiles per zoom, eps per zoom.
+std::string describe_pyramid(const std::string& path, tiler::Scheme scheme) {
+    std::ostringstream out;
+    out.precision(6);
+    std::shared_ptr<const tiler::Layer> layer;
+    try {
+        tiler::LayerOptions options;
+        options.sources = {path};
+        options.scheme = scheme;
+        layer = tiler::Layer::open(options);
+    } catch (const InputError& e) {
+        out << "  pyramid:     none (" << e.what() << ")\n";
+        return out.str();
+    }
+    const auto& o = layer->options();
+    const auto b = layer->data_bounds();
+    out << "  pyramid:     " << to_string(o.scheme) << ", " << o.tile_size
+        << "-sample tiles, zooms " << layer->min_zoom() << ".." << layer->max_zoom() << ", heights "
+        << to_string(layer->source_datum()) << " -> WGS84 ellipsoid (" << layer->min_height()
+        << " .. " << layer->max_height() << " m)\n";
+    out << "  footprint:   west " << b.west << ", south " << b.south << ", east " << b.east
+        << ", north " << b.north << " (pixel centres)\n";
+    out << "    zoom  tiles       columns x rows      eps (m)\n";
+    for (int z = layer->min_zoom(); z <= layer->max_zoom(); ++z) {
+        const tiler::TileRange r = layer->tiles_at(z);
+        char line[128];
+        std::snprintf(line,
+                      sizeof line,
+                      "    %4d  %-10lld  %8lld x %-8lld  %g\n",
+                      z,
+                      static_cast<long long>(r.count()),
+                      static_cast<long long>(r.x1 - r.x0 + 1),
+                      static_cast<long long>(r.y1 - r.y0 + 1),
+                      layer->eps_for_zoom(z));
+        out << line;
+    }
+    return out.str();
+}
+
 int run(const Args& args) {
     if (args.positional.empty()) {
         throw InputError("info: name a DEM file; see 'terrabound info --help'");
     }
+    const tiler::Scheme scheme = tiler::parse_scheme(args.get("scheme").value_or("geodetic"));
     for (const auto& path : args.positional) {
         std::fputs(describe(tiler::inspect_dem(path)).c_str(), stdout);
+        std::fputs(describe_pyramid(path, scheme).c_str(), stdout);
     }
     return 0;
 }
 
-}  // namespace
+} // namespace
 
 const Command& info_command() {
     static const Command command{
         {"info",
          "DEM...",
-         "Describe a DEM: size, CRS, data type, nodata, height range, resolution.",
-         {},
-         ""},
+         "Describe a DEM: size, CRS, data type, nodata, height range, resolution, pyramid.",
+         {{"scheme", "NAME", "pyramid plan for geodetic (default) or mercator tiles"}},
+         "The pyramid plan is what 'terrabound build' and 'serve' make of the DEM alone with\n"
+         "default options: zoom range, tiles per zoom and each zoom's eps (metres)."},
         run};
     return command;
 }
 
-}  // namespace tb::cli
+} // namespace tb::cli

@@ -1,21 +1,105 @@
-// terrabound mesh: not available yet.
+// terrabound mesh: mesh one whole raster in grid coordinates with a guaranteed vertical error.
+#include "core/error.hpp"
+#include "core/triangulate.hpp"
 #include "server/commands.hpp"
+#include "tiler/gdal_source.hpp"
+#include "tiler/layer.hpp"
 
+#include <algorithm>
+#include <chrono>
+#include <cmath>
 #include <cstdio>
+#include <string>
 
 namespace tb::cli {
 namespace {
 
-int run(const Args&) {
-    std::fprintf(stderr, "terrabound mesh: not implemented yet; it arrives with the core mesher (issue 3)\n");
-    return 1;
+std::string extension_of(const std::string& path) {
+    const auto slash = path.find_last_of('/');
+    const auto dot = path.find_last_of('.');
+    if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) {
+        return "";
+    }
+    return path.substr(dot + 1);
 }
 
-}  // namespace
+int run(const Args& args) {
+    if (args.positional.size() != 1) {
+        throw InputError("mesh: name exactly one raster; see 'terrabound mesh --help'");
+    }
+    const std::string& input = args.positional[0];
+    if (!args.has("eps")) {
+        throw InputError("mesh: give the vertical error bound with --eps E");
+    }
+    const double eps = args.get_double("eps", 0);
+    const auto out = args.get("o");
+    if (!out) {
+        throw InputError("mesh: name the output with -o OUT.obj or -o OUT.json");
+    }
+    const std::string ext = extension_of(*out);
+    if (ext != "obj" && ext != "json") {
+        throw InputError("mesh: -o " + *out + ": unknown output type; use .obj or .json");
+    }
+    const auto start = std::chrono::steady_clock::now();
+    const core::HeightGrid grid = tiler::DemSource::open({input})->read_all();
+    if (grid.width < 2 || grid.height < 2) {
+        throw InputError(input + ": " + std::to_string(grid.width) + " x " +
+                         std::to_string(grid.height) + " samples; meshing needs at least 2 x 2");
+    }
+    // float32 heights cannot resolve an eps far below their own precision.
+    float top = 0;
+    for (float h : grid.heights) {
+        top = std::max(top, std::abs(h));
+    }
+    if (!(eps > 0) || eps < std::ldexp(static_cast<double>(top), -20)) {
+        throw InputError("mesh: --eps " + std::to_string(eps) +
+                         " is not usable; give eps > 0 and at least 1e-6 of the largest height (" +
+                         std::to_string(top) + ")");
+    }
+    core::TriangulateOptions options;
+    options.eps = eps;
+    options.lock_border = !args.has("no-lock-border");
+    const core::Mesh mesh = core::triangulate(grid, options);
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    tiler::write_file_atomically(
+        *out, ext == "obj" ? tiler::mesh_to_obj(mesh) : tiler::mesh_to_json(mesh));
+    if (args.has("stats")) {
+        std::printf("{\"width\":%d,\"height\":%d,\"eps\":%.17g,\"vertices\":%zu,\"triangles\":%zu,"
+                    "\"max_error\":%.17g,\"seconds\":%.6f}\n",
+                    grid.width,
+                    grid.height,
+                    eps,
+                    mesh.points.size(),
+                    mesh.triangle_count(),
+                    core::max_error(mesh, grid),
+                    seconds);
+    }
+    return 0;
+}
+
+} // namespace
 
 const Command& mesh_command() {
-    static const Command command{{"mesh", "INPUT --eps E -o OUT.{obj,json}", "Mesh one raster with a guaranteed vertical error.", {}, ""}, run};
+    static const Command command{
+        {"mesh",
+         "INPUT --eps E -o OUT.{obj,json}",
+         "Mesh one raster with a guaranteed vertical error.",
+         {
+             {"eps", "E", "vertical error bound, in the raster's height unit (> 0)"},
+             {"o", "OUT", "output: .obj (v column row height, 1-based faces) or .json"},
+             {"stats",
+              "",
+              "print one JSON line: width, height, eps, vertices, triangles, "
+              "max_error, seconds"},
+             {"no-lock-border", "", "let the border be simplified like the interior"},
+         },
+         "Band 1 is meshed in grid coordinates (x = column, y = row, row 0 first); nodata\n"
+         "samples constrain nothing and are filled from their surroundings. No georeferencing\n"
+         "is needed. JSON output: {\"vertices\":[x,y,z,...],\"triangles\":[i,j,k,...]} (0-based),\n"
+         "the format shared/bench's linf_check reads."},
+        run};
     return command;
 }
 
-}  // namespace tb::cli
+} // namespace tb::cli

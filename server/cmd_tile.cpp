@@ -1,21 +1,112 @@
-// terrabound tile: not available yet.
+// terrabound tile: one tile of a DEM, as the tile raster (.tif), its mesh (.obj) or encoded
+// (.glb / .drc), exactly as the layer makes it for `build` and `serve`.
+#include "core/error.hpp"
+#include "core/triangulate.hpp"
 #include "server/commands.hpp"
+#include "tiler/gdal_source.hpp"
+#include "tiler/layer.hpp"
+#include "tiler/log.hpp"
 
+#include <algorithm>
 #include <cstdio>
+#include <sstream>
 
 namespace tb::cli {
 namespace {
 
-int run(const Args&) {
-    std::fprintf(stderr, "terrabound tile: not implemented yet; it arrives with the tiler (issue 4)\n");
-    return 1;
+std::string extension_of(const std::string& path) {
+    const auto slash = path.find_last_of('/');
+    const auto dot = path.find_last_of('.');
+    if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) {
+        return "";
+    }
+    return path.substr(dot + 1);
 }
 
-}  // namespace
+int run(const Args& args) {
+    if (args.positional.size() < 4) {
+        throw InputError("tile: expected INPUT... Z X Y; see 'terrabound tile --help'");
+    }
+    const auto out = args.get("o");
+    if (!out) {
+        throw InputError("tile: name the output with -o OUT.{glb,drc,obj,tif}");
+    }
+    const std::string ext = extension_of(*out);
+    if (ext != "glb" && ext != "drc" && ext != "obj" && ext != "tif") {
+        throw InputError("tile: -o " + *out +
+                         ": unknown output type; use .glb, .drc, .obj or .tif");
+    }
+    const std::size_t n = args.positional.size();
+    tiler::TileId id;
+    const long long z = to_int(args.positional[n - 3], "tile: Z");
+    if (z < 0 || z > tiler::kMaxZoom) {
+        throw InputError("tile: Z " + args.positional[n - 3] + " is outside 0.." +
+                         std::to_string(tiler::kMaxZoom));
+    }
+    id.z = static_cast<int>(z);
+    id.x = to_int(args.positional[n - 2], "tile: X");
+    id.y = to_int(args.positional[n - 1], "tile: Y");
+
+    tiler::LayerOptions options;
+    options.sources.assign(args.positional.begin(), args.positional.end() - 3);
+    options.scheme = tiler::parse_scheme(args.get("scheme").value_or("geodetic"));
+    const long long size = args.get_int("size", 256);
+    if (size < 2 || size > 4096) {
+        throw InputError("tile: --size " + std::to_string(size) + " is outside 2..4096");
+    }
+    options.tile_size = static_cast<int>(size);
+    options.datum = tiler::parse_datum(args.get("datum").value_or("auto"));
+    const auto layer = tiler::Layer::open(options);
+    const double eps = args.has("eps") ? args.get_double("eps", 0) : layer->eps_for_zoom(id.z);
+    tiler::check_eps(eps, "tile: --eps");
+
+    std::ostringstream summary;
+    summary << "tile " << id.z << "/" << id.x << "/" << id.y << " (" << to_string(options.scheme)
+            << "): ";
+    if (ext == "tif") {
+        const tiler::TileRaster raster = layer->make_raster(id);
+        tiler::write_tile_raster_tiff(raster, *out);
+        const auto voids = std::count(raster.grid.valid.begin(), raster.grid.valid.end(), 0);
+        summary << raster.grid.width << " x " << raster.grid.height << " samples, " << voids
+                << " void";
+    } else if (ext == "obj") {
+        const tiler::TileRaster raster = layer->make_raster(id);
+        const core::Mesh mesh = tiler::mesh_tile(raster, eps);
+        tiler::write_file_atomically(*out, tiler::mesh_to_obj(mesh));
+        summary << mesh.points.size() << " vertices, " << mesh.triangle_count()
+                << " triangles, eps " << eps << " m";
+    } else {
+        const auto format = *tiler::parse_format(ext);
+        const std::string bytes = layer->make_tile_at(id, format, eps);
+        tiler::write_file_atomically(*out, bytes);
+        summary << bytes.size() << " bytes, eps " << eps << " m";
+    }
+    summary << " -> " << *out;
+    log::info(summary.str());
+    return 0;
+}
+
+} // namespace
 
 const Command& tile_command() {
-    static const Command command{{"tile", "INPUT Z X Y -o OUT", "Make one tile (tile raster, mesh, or encoded tile) to a file.", {}, ""}, run};
+    static const Command command{
+        {"tile",
+         "INPUT... Z X Y -o OUT.{glb,drc,obj,tif}",
+         "Make one tile (tile raster, mesh, or encoded tile) to a file.",
+         {
+             {"o", "OUT", "output file; its extension picks the type (overwritten)"},
+             {"scheme", "NAME", "geodetic (EPSG:4326, TMS, default) or mercator (EPSG:3857, XYZ)"},
+             {"eps", "E", "vertical error bound in metres (default: the zoom's ladder eps)"},
+             {"size", "N", "tile raster of (N+1) x (N+1) samples (default 256)"},
+             {"datum", "NAME", "source heights: auto (default), egm96 or ellipsoid"},
+         },
+         "Outputs: .glb (glTF + Draco, ECEF), .drc (Draco, local ENU), .obj (the mesh in tile\n"
+         "grid coordinates: v column row height, heights above the WGS84 ellipsoid) and .tif\n"
+         "(the tile raster exactly as meshed, Float32, voids in the mask band). Several INPUTs\n"
+         "are mosaicked. Z X Y outside the scheme is an error (exit 2); a tile without data\n"
+         "is reported as not found (exit 2)."},
+        run};
     return command;
 }
 
-}  // namespace tb::cli
+} // namespace tb::cli

@@ -1,27 +1,35 @@
 #pragma once
 // What a DEM is, as GDAL reads it (band 1). GDAL types stay inside tiler/gdal_*.cpp.
+#include "core/mesh.hpp"
+#include "tiler/tile_grid.hpp"
+#include "tiler/tile_raster.hpp"
+
 #include <array>
+#include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
+#include <string_view>
+#include <vector>
 
 namespace tb::tiler {
 
 struct DemInfo {
     std::string path;
-    std::string driver;                 // GDAL short name: GTiff, SRTMHGT, DTED, AAIGrid, ...
+    std::string driver; // GDAL short name: GTiff, SRTMHGT, DTED, AAIGrid, ...
     int width = 0, height = 0, bands = 0;
-    std::string data_type;              // Int16, UInt16, Int32, Float32, ...
-    std::string crs_name;               // "WGS 84", "" when the file has none
-    std::string crs_id;                 // "EPSG:4326", "" when not identified
-    bool geographic = false;            // the CRS is lon/lat
+    std::string data_type;   // Int16, UInt16, Int32, Float32, ...
+    std::string crs_name;    // "WGS 84", "" when the file has none
+    std::string crs_id;      // "EPSG:4326", "" when not identified
+    bool geographic = false; // the CRS is lon/lat
     bool has_geotransform = false;
     std::array<double, 6> geotransform{0, 1, 0, 0, 0, 1};
     std::optional<double> nodata;
     double scale = 1.0, offset = 0.0;
-    bool has_data = false;              // false when every sample is nodata
-    double min_height = 0, max_height = 0;  // over valid samples, after scale/offset
-    std::optional<std::array<double, 4>> lonlat_bounds;  // west, south, east, north (degrees)
-    double resolution_m = 0;            // approximate ground size of one pixel, metres
+    bool has_data = false;                              // false when every sample is nodata
+    double min_height = 0, max_height = 0;              // over valid samples, after scale/offset
+    std::optional<std::array<double, 4>> lonlat_bounds; // west, south, east, north (degrees)
+    double resolution_m = 0; // approximate ground size of one pixel, metres
 };
 
 // Opens `path` read-only and describes band 1 (statistics computed from the data, not from
@@ -31,4 +39,102 @@ DemInfo inspect_dem(const std::string& path);
 // Registers GDAL drivers once and routes GDAL's error handler to our logger. Idempotent.
 void init_gdal();
 
-}  // namespace tb::tiler
+// ---- Reading DEMs for tiles (tiler/gdal_reader.cpp) ----
+
+// A rectangular block of the global sample lattice of one zoom (see sample_column/sample_row):
+// `width` x `height` samples, row-major from the north-west corner. Heights are the source's
+// (scale/offset applied, datum not converted); valid = 0 where the source has nodata or no
+// coverage, and the height there is 0.
+struct LatticeBlock {
+    std::int64_t column0 = 0, row0 = 0;
+    int width = 0, height = 0;
+    std::vector<double> heights;
+    std::vector<std::uint8_t> valid;
+};
+
+// Band 1 of one DEM or of an in-memory VRT mosaic of several, opened for reading from many
+// threads: each call borrows a GDAL handle from a small pool (GDAL handles are not
+// thread-safe), so a DemSource is safe to share.
+class DemSource {
+public:
+    // Throws InputError naming the file and problem: unreadable, no band, complex or RGB(A)
+    // data, sources of different CRSs.
+    static std::shared_ptr<const DemSource> open(const std::vector<std::string>& paths);
+    virtual ~DemSource() = default;
+
+    // Description of the (mosaic) raster, as inspect_dem gives it.
+    virtual const DemInfo& info() const = 0;
+    // True when the CRS is georeferenced (CRS + geotransform): tiles can be made.
+    virtual bool georeferenced() const = 0;
+    // Lon/lat box of the pixel-centre hull (densified for projected CRSs). Requires
+    // georeferenced().
+    virtual LonLatBox footprint() const = 0;
+    // True when the CRS states that heights are WGS84 ellipsoidal (a 3D geographic CRS, or a
+    // compound CRS whose vertical part is ellipsoidal).
+    virtual bool ellipsoidal_heights() const = 0;
+    // Source pixels per lattice sample at zoom z (geometric mean, at the footprint's centre).
+    virtual double pixels_per_sample(Scheme scheme, int z, int size) const = 0;
+
+    // Bilinear samples of the source at the lattice points of (scheme, z, size), reading a
+    // window of a reduced-resolution view of the source chosen per zoom (every
+    // 2^k-th pixel, aligned to the source's pixel grid), so the same lattice point gets the
+    // same value, bit for bit, whichever block it is read in. Thread-safe.
+    virtual LatticeBlock sample(Scheme scheme,
+                                int z,
+                                int size,
+                                std::int64_t column0,
+                                std::int64_t row0,
+                                int width,
+                                int height) const = 0;
+
+    // The whole band 1 at full resolution, row 0 = first raster row, nodata marked invalid and
+    // filled (fill_voids, margin 0). Needs no georeferencing. Throws InputError when every
+    // sample is nodata or above 400 Mpixel.
+    virtual core::HeightGrid read_all() const = 0;
+};
+
+// Writes a tile raster as a georeferenced single-band Float32 GeoTIFF (EPSG:4326 or EPSG:3857
+// by scheme), the heights exactly as meshed, voids marked by an internal mask band. Written to
+// a temporary file next to `path` and renamed. Throws IoError.
+void write_tile_raster_tiff(const TileRaster& raster, const std::string& path);
+
+// A float grid read whole with GDAL (the geoid), north-up geotransform.
+struct FloatGrid {
+    int width = 0, height = 0;
+    std::array<double, 6> geotransform{};
+    std::vector<float> values;
+};
+FloatGrid read_float_grid(const std::string& path); // InputError when it cannot be read
+
+// ---- Tile lattice arithmetic (tiler/tile_raster.cpp) ----
+// The global sample lattice of zoom z for tiles of `size` samples: column c sits at native
+// x = x_min + c * step, row r at native y = y_max - r * step (degrees for geodetic, EPSG:3857
+// metres for mercator), step = tile width / size. Row 0 is the scheme's north edge. A tile's
+// sample (i, j) is lattice point (x * size + i, row_of_tile_top + j), so neighbours share
+// border samples exactly.
+double lattice_x(Scheme scheme, int z, int size, std::int64_t column);
+double lattice_y(Scheme scheme, int z, int size, std::int64_t row);
+std::int64_t tile_first_column(Scheme scheme, const TileId& id, int size);
+std::int64_t tile_first_row(Scheme scheme, const TileId& id, int size);
+LonLat native_to_lonlat(Scheme scheme, double x, double y);
+void lonlat_to_native(Scheme scheme, const LonLat& p, double& x, double& y);
+
+// Fills the voids of a `width` x `height` block of heights in place (valid = 0 entries).
+// With `margin` > 0 the block is a tile grid plus `margin` extra samples on every side, and
+// the fill of every tile sample depends only on samples within `margin` of it, or on the
+// tile border line it lies on, so tiles sharing a border fill it identically:
+//   1. a void within `margin` (chessboard distance) of valid samples takes the inverse-square
+//      distance mean of the valid samples at that distance;
+//   2. a tile corner still void takes `fallback` (sea level);
+//   3. border samples still void interpolate linearly along their border between filled ones;
+//   4. interior voids take the mean of filled neighbours, ring by ring from the filled ones.
+// With margin 0 (a whole raster), steps 2 and 3 are skipped and step 4 covers the border too;
+// a block with no valid sample at all is set to `fallback`.
+void fill_voids(std::vector<double>& heights,
+                const std::vector<std::uint8_t>& valid,
+                int width,
+                int height,
+                int margin,
+                double fallback);
+
+} // namespace tb::tiler

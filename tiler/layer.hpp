@@ -1,37 +1,40 @@
 #pragma once
 // A layer: one or more DEMs published as one tile pyramid. This is what the `tile`, `build`
 // and `serve` commands share: DEM -> tile raster -> mesh -> encoded bytes.
+#include "core/mesh.hpp"
 #include "tiler/format.hpp"
 #include "tiler/tile_grid.hpp"
+#include "tiler/tile_raster.hpp"
 
 #include <memory>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace tb::tiler {
 
 enum class VerticalDatum {
-    Auto,       // egm96 for SRTM/DTED-like sources (.hgt, .dt0-2), otherwise as the source says
-    Egm96,      // source heights are EGM96 orthometric: add the geoid undulation
-    Ellipsoid,  // source heights are already WGS84 ellipsoidal
+    Auto,      // egm96, unless the source CRS states WGS84 ellipsoidal heights (EPSG:4979-like)
+    Egm96,     // source heights are EGM96 orthometric: add the geoid undulation
+    Ellipsoid, // source heights are already WGS84 ellipsoidal
 };
 
 struct LayerOptions {
-    std::string name = "terrain";             // URL-safe: [A-Za-z0-9_-]+
-    std::vector<std::string> sources;         // DEM paths or GDAL names (VRT, /vsicurl/, ...)
+    std::string name = "terrain";     // URL-safe: [A-Za-z0-9_-]+
+    std::vector<std::string> sources; // DEM paths or GDAL names (VRT, /vsicurl/, ...)
     Scheme scheme = Scheme::Geodetic;
-    int tile_size = 256;                      // N: a tile raster has (N+1) x (N+1) samples
-    std::optional<int> min_zoom, max_zoom;    // default: from the source's extent and resolution
-    std::optional<double> finest_eps;         // metres at max_zoom; eps doubles per level up
-    std::vector<double> eps_levels;           // extra eps (metres) selectable per request
+    int tile_size = 256;                   // N: a tile raster has (N+1) x (N+1) samples
+    std::optional<int> min_zoom, max_zoom; // default: from the source's extent and resolution
+    std::optional<double> finest_eps;      // metres at max_zoom; eps doubles per level up
+    std::vector<double> eps_levels;        // extra eps (metres) selectable per request
     VerticalDatum datum = VerticalDatum::Auto;
 };
 
 // Where a tile request's eps comes from: the zoom's own ladder value, or one of the layer's
 // configured eps_levels (by index).
 struct EpsChoice {
-    int level = -1;  // -1: the zoom's ladder eps; k >= 0: options().eps_levels[k]
+    int level = -1; // -1: the zoom's ladder eps; k >= 0: options().eps_levels[k]
 };
 
 class Layer {
@@ -44,9 +47,9 @@ public:
     virtual const LayerOptions& options() const = 0;
     virtual int min_zoom() const = 0;
     virtual int max_zoom() const = 0;
-    virtual double eps_for_zoom(int z) const = 0;      // the ladder: finest * 2^(max_zoom - z)
-    virtual LonLatBox data_bounds() const = 0;         // the sources' extent in lon/lat
-    virtual TileRange tiles_at(int z) const = 0;       // tiles of zoom z that may hold data
+    virtual double eps_for_zoom(int z) const = 0; // the ladder: finest * 2^(max_zoom - z)
+    virtual LonLatBox data_bounds() const = 0;    // the sources' extent in lon/lat
+    virtual TileRange tiles_at(int z) const = 0;  // tiles of zoom z that may hold data
     virtual bool may_have_tile(const TileId& id) const = 0;
 
     // The layer's tileset documents by relative path: "tileset.json" (3D Tiles 1.1; content URIs
@@ -57,6 +60,43 @@ public:
     // The encoded tile. Throws InputError for an id outside the scheme or an unknown eps level,
     // NotFound when the tile holds no data. Safe to call from many threads at once.
     virtual std::string make_tile(const TileId& id, Format format, EpsChoice eps = {}) const = 0;
+
+    // ---- the stages of make_tile, for the `tile` command, tests and benchmarks ----
+
+    // The tile raster a tile is meshed from: (N+1) x (N+1) ellipsoidal heights, voids filled
+    // (see fill_voids in tiler/gdal_source.hpp; a tile with no data near it lies at 0 m
+    // orthometric, i.e. on the geoid). Same errors as make_tile.
+    virtual TileRaster make_raster(const TileId& id) const = 0;
+    // The encoded tile at an explicit published eps (metres, >= 0.001): raster, then
+    // core::triangulate at error_budget(eps).mesh_eps with locked borders, then encode_tile.
+    virtual std::string make_tile_at(const TileId& id, Format format, double eps) const = 0;
+
+    // Ellipsoidal height range every tile's mesh stays within (padded by 1 m), metres.
+    virtual double min_height() const = 0;
+    virtual double max_height() const = 0;
+    // The datum the source heights are taken in (Auto resolved: Egm96 unless the source's CRS
+    // states WGS84 ellipsoidal heights).
+    virtual VerticalDatum source_datum() const = 0;
 };
 
-}  // namespace tb::tiler
+// Checks a published eps (metres) and throws InputError naming `what` unless it is finite and
+// at least 0.001 m (below that, float32 heights cannot honour it).
+void check_eps(double eps, const std::string& what);
+
+// core::triangulate(raster.grid, {mesh_eps, lock_border = true}): the tile mesh.
+core::Mesh mesh_tile(const TileRaster& raster, double mesh_eps);
+
+// A mesh in grid coordinates as text: OBJ ("v column row height", 1-based "f i j k") or JSON
+// ({"vertices":[x,y,z,...],"triangles":[i,j,k,...]}, 0-based), heights with 9 significant
+// digits (float32 round trip). The formats shared/bench's linf_check reads.
+std::string mesh_to_obj(const core::Mesh& mesh);
+std::string mesh_to_json(const core::Mesh& mesh);
+
+// Writes `bytes` to a temporary file next to `path`, then renames it over `path`, so a reader
+// never sees a half-written file. Throws IoError naming the path.
+void write_file_atomically(const std::string& path, std::string_view bytes);
+
+VerticalDatum parse_datum(const std::string& name); // "auto" | "egm96" | "ellipsoid"
+const char* to_string(VerticalDatum datum);
+
+} // namespace tb::tiler

@@ -1,0 +1,213 @@
+// The Layer: zoom plan, eps ladder, tiles per zoom, datum, errors, mosaics and encoded tiles.
+#include "core/error.hpp"
+#include "core/triangulate.hpp"
+#include "tests/tiler/test_raster_util.hpp"
+#include "tiler/draco_decode.hpp"
+#include "tiler/gdal_source.hpp"
+#include "tiler/geoid.hpp"
+#include "tiler/layer.hpp"
+
+#include <doctest/doctest.h>
+
+#include <cmath>
+#include <future>
+#include <thread>
+
+using namespace tb::tiler;
+using tb_test::Fixture;
+using tb_test::ScratchDir;
+
+namespace {
+
+std::shared_ptr<const Layer> open_layer(std::vector<std::string> sources,
+                                        Scheme scheme = Scheme::Geodetic,
+                                        VerticalDatum datum = VerticalDatum::Auto) {
+    LayerOptions options;
+    options.sources = std::move(sources);
+    options.scheme = scheme;
+    options.datum = datum;
+    return Layer::open(options);
+}
+
+} // namespace
+
+TEST_CASE("an SRTM cell gets zooms 7..10, a doubling eps ladder and consistent tile sets") {
+    const auto path = tb_test::shared_dem("N44W072.hgt");
+    if (!path) {
+        return;
+    }
+    const auto layer = open_layer({*path});
+    CHECK(layer->min_zoom() == 7);
+    CHECK(layer->max_zoom() == 10);
+    // Pixel centres of an .hgt lie on whole degrees: the footprint is the degree cell.
+    const LonLatBox b = layer->data_bounds();
+    CHECK(b.west == doctest::Approx(-72));
+    CHECK(b.east == doctest::Approx(-71));
+    CHECK(b.south == doctest::Approx(44));
+    CHECK(b.north == doctest::Approx(45));
+    // 3" pixels at 44.5 N: about 78 m, so the finest eps is about 1.7 m.
+    CHECK(layer->eps_for_zoom(10) == doctest::Approx(1.74).epsilon(0.02));
+    for (int z = 7; z < 10; ++z) {
+        CHECK(layer->eps_for_zoom(z) == doctest::Approx(2 * layer->eps_for_zoom(z + 1)));
+    }
+    CHECK(layer->tiles_at(6).empty());
+    CHECK(layer->tiles_at(11).empty());
+    CHECK(layer->tiles_at(7).count() == 2);
+    for (int z = 7; z <= 10; ++z) {
+        const TileRange r = layer->tiles_at(z);
+        CHECK(r.count() > 0);
+        CHECK(layer->may_have_tile({z, r.x0, r.y0}));
+        CHECK(layer->may_have_tile({z, r.x1, r.y1}));
+        CHECK_FALSE(layer->may_have_tile({z, r.x0 - 1, r.y0}));
+        CHECK_FALSE(layer->may_have_tile({z, r.x1, r.y1 + 1}));
+    }
+    CHECK(layer->min_height() < 115 - 28); // lowest sample plus the geoid (about -28 m)
+    CHECK(layer->max_height() > 1908 - 30);
+    CHECK(layer->source_datum() == VerticalDatum::Egm96);
+    std::string doc;
+    CHECK(layer->document("tileset.json", doc));
+    CHECK(doc.find("\"asset\"") != std::string::npos);
+}
+
+TEST_CASE("tile ids outside the scheme are input errors, tiles outside the data not found") {
+    const auto path = tb_test::shared_dem("N44W072.hgt");
+    if (!path) {
+        return;
+    }
+    const auto layer = open_layer({*path});
+    CHECK_THROWS_WITH_AS(
+        layer->make_raster({25, 0, 0}), doctest::Contains("outside the geodetic"), tb::InputError);
+    CHECK_THROWS_AS(layer->make_raster({3, 16, 0}), tb::InputError);
+    CHECK_THROWS_AS(layer->make_raster({3, -1, 0}), tb::InputError);
+    CHECK_THROWS_WITH_AS(
+        layer->make_raster({10, 0, 0}), doctest::Contains("has no data there"), tb::NotFound);
+    CHECK_THROWS_AS(layer->make_raster({5, 9, 22}), tb::NotFound); // above min zoom
+    const TileRange r = layer->tiles_at(10);
+    CHECK_THROWS_WITH_AS(layer->make_tile({10, r.x0, r.y0}, Format::Glb, EpsChoice{3}),
+                         doctest::Contains("eps level 3"),
+                         tb::InputError);
+    CHECK_THROWS_AS(layer->make_tile_at({10, r.x0, r.y0}, Format::Glb, 0.0), tb::InputError);
+    CHECK_THROWS_AS(layer->make_tile_at({10, r.x0, r.y0}, Format::Glb, NAN), tb::InputError);
+}
+
+TEST_CASE("EGM96 heights become ellipsoidal by adding the geoid undulation") {
+    const auto path = tb_test::shared_dem("N44W072.hgt");
+    if (!path) {
+        return;
+    }
+    const auto egm = open_layer({*path}, Scheme::Geodetic, VerticalDatum::Egm96);
+    const auto ell = open_layer({*path}, Scheme::Geodetic, VerticalDatum::Ellipsoid);
+    const TileId id{9, 308, 382};
+    const TileRaster a = egm->make_raster(id), b = ell->make_raster(id);
+    for (int k : {0, 77, 128, 256}) {
+        const LonLat p = grid_to_lonlat(a, k, 256 - k);
+        const double n = egm96_undulation(p.lon, p.lat);
+        CHECK(n == doctest::Approx(-28).epsilon(0.15));
+        CHECK(a.grid.at(k, 256 - k) - b.grid.at(k, 256 - k) == doctest::Approx(n).epsilon(1e-4));
+    }
+}
+
+TEST_CASE("a raster without georeferencing or without data cannot be tiled, with clear errors") {
+    ScratchDir dir;
+    Fixture plain;
+    plain.values.assign(16, 10.0);
+    const std::string no_georef = tb_test::write_fixture(dir.file("plain.tif"), plain);
+    CHECK_THROWS_WITH_AS(
+        open_layer({no_georef}), doctest::Contains("has no georeferencing"), tb::InputError);
+    Fixture empty;
+    empty.geotransform = std::array<double, 6>{10, 0.01, 0, 45, 0, -0.01};
+    empty.epsg = 4326;
+    empty.nodata = -9999;
+    empty.values.assign(16, -9999);
+    const std::string all_nodata = tb_test::write_fixture(dir.file("empty.tif"), empty);
+    CHECK_THROWS_WITH_AS(
+        open_layer({all_nodata}), doctest::Contains("every sample"), tb::InputError);
+    CHECK_THROWS_WITH_AS(
+        open_layer({dir.file("missing.tif")}), doctest::Contains("no such file"), tb::InputError);
+    LayerOptions bad;
+    bad.sources = {no_georef};
+    bad.name = "has space";
+    CHECK_THROWS_WITH_AS(Layer::open(bad), doctest::Contains("letters, digits"), tb::InputError);
+}
+
+TEST_CASE("two SRTM cells mosaic into one layer that matches each cell where it is alone") {
+    const auto south = tb_test::shared_dem("N44W072.hgt");
+    const auto north = tb_test::shared_dem("N45W072.hgt");
+    if (!south || !north) {
+        return;
+    }
+    const auto both = open_layer({*south, *north});
+    const auto alone = open_layer({*south});
+    CHECK(both->data_bounds().south == doctest::Approx(44));
+    CHECK(both->data_bounds().north == doctest::Approx(46));
+    const TileId inside{10, 617, 765};
+    const TileRaster a = both->make_raster(inside), b = alone->make_raster(inside);
+    CHECK(a.grid.heights == b.grid.heights);
+    // A tile across the 45 N seam has data on both sides.
+    const TileId seam{10, 617, 768}; // rows 45.0 - 45.17 N... and below
+    const TileRaster s = both->make_raster(seam);
+    CHECK(s.grid.valid.empty());
+}
+
+TEST_CASE("a projected DEM tiles in both schemes, voids outside its outline") {
+    const auto path = tb_test::shared_dem("elev_vinschgau.tif");
+    if (!path) {
+        return;
+    }
+    for (Scheme scheme : {Scheme::Geodetic, Scheme::Mercator}) {
+        const auto layer = open_layer({*path}, scheme);
+        const int z = layer->min_zoom();
+        const TileRange r = layer->tiles_at(z);
+        REQUIRE(r.count() >= 1);
+        REQUIRE(r.count() <= 4);
+        bool some_valid = false;
+        for (std::int64_t x = r.x0; x <= r.x1; ++x) {
+            for (std::int64_t y = r.y0; y <= r.y1; ++y) {
+                const TileRaster t = layer->make_raster({z, x, y});
+                CHECK_FALSE(t.grid.valid.empty()); // part of every tile lies outside the DEM
+                for (std::size_t k = 0; k < t.grid.heights.size(); ++k) {
+                    CHECK(std::isfinite(t.grid.heights[k]));
+                    some_valid = some_valid || t.grid.valid[k];
+                    if (t.grid.valid[k]) {
+                        CHECK(t.grid.heights[k] > 388 + 40); // geoid about +47 m here
+                    }
+                }
+            }
+        }
+        CHECK(some_valid);
+    }
+}
+
+TEST_CASE("encoded tiles decode, and many threads get the same bytes as one") {
+    const auto path = tb_test::shared_dem("N44W072.hgt");
+    if (!path) {
+        return;
+    }
+    LayerOptions options;
+    options.sources = {*path};
+    options.tile_size = 64; // small tiles keep this Debug test fast
+    const auto layer = Layer::open(options);
+    const int z = layer->min_zoom() + 1;
+    const TileRange r = layer->tiles_at(z);
+    std::vector<TileId> ids;
+    for (std::int64_t x = r.x0; x <= r.x1 && ids.size() < 4; ++x) {
+        ids.push_back({z, x, r.y0});
+    }
+    std::vector<std::string> sequential;
+    for (const auto& id : ids) {
+        sequential.push_back(layer->make_tile(id, Format::Glb));
+    }
+    std::vector<std::future<std::string>> parallel;
+    for (const auto& id : ids) {
+        parallel.push_back(
+            std::async(std::launch::async, [&, id] { return layer->make_tile(id, Format::Glb); }));
+    }
+    for (std::size_t k = 0; k < ids.size(); ++k) {
+        CHECK(parallel[k].get() == sequential[k]);
+    }
+    const DecodedTile decoded = decode_glb(sequential[0]);
+    CHECK(decoded.indices.size() >= 6);
+    CHECK(decoded.positions.size() >= 4);
+    const DecodedTile drc = decode_drc(layer->make_tile(ids[0], Format::Drc));
+    CHECK(drc.indices.size() == decoded.indices.size());
+}

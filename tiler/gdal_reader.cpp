@@ -1,0 +1,617 @@
+// Reading DEMs for tiles: band 1 of one file or of an in-memory VRT mosaic, sampled bilinearly
+// at the global lattice of a zoom, one GDAL handle per concurrent reader.
+#include "core/error.hpp"
+#include "tiler/gdal_source.hpp"
+#include "tiler/log.hpp"
+
+#include <cpl_conv.h>
+#include <cpl_error.h>
+#include <cpl_string.h>
+#include <gdal_priv.h>
+#include <gdal_utils.h>
+#include <ogr_spatialref.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <mutex>
+#include <unistd.h>
+
+namespace tb::tiler {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr double kMetresPerDegree = 6378137.0 * kPi / 180.0;
+
+std::string gdal_message() {
+    const char* m = CPLGetLastErrorMsg();
+    return m && *m ? m : "unknown GDAL error";
+}
+
+struct CslDeleter {
+    void operator()(char** list) const { CSLDestroy(list); }
+};
+using CslPtr = std::unique_ptr<char*, CslDeleter>;
+
+struct BuildVrtOptionsDeleter {
+    void operator()(GDALBuildVRTOptions* o) const { GDALBuildVRTOptionsFree(o); }
+};
+
+OGRSpatialReference scheme_srs(Scheme scheme) {
+    OGRSpatialReference srs;
+    srs.importFromEPSG(scheme == Scheme::Geodetic ? 4326 : 3857);
+    srs.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    return srs;
+}
+
+// Rejects what is not a height band: complex numbers, colour images (RGB(A), palettes; e.g.
+// Terrain-RGB PNGs must be decoded to heights first).
+void check_band(const std::string& name, GDALDataset& ds) {
+    GDALRasterBand* band = ds.GetRasterBand(1);
+    const GDALDataType type = band->GetRasterDataType();
+    if (GDALDataTypeIsComplex(type)) {
+        throw InputError(name + ": band 1 holds complex numbers (" + GDALGetDataTypeName(type) +
+                         "), not heights; convert it to a real type");
+    }
+    const GDALColorInterp colour = band->GetColorInterpretation();
+    if (colour == GCI_PaletteIndex || colour == GCI_RedBand ||
+        (type == GDT_Byte && ds.GetRasterCount() >= 3)) {
+        throw InputError(
+            name + ": is a colour image (RGB(A) or palette), not a height raster; decode it "
+                   "to heights first (e.g. Terrain-RGB: -10000 + (R*65536 + G*256 + B) * 0.1)");
+    }
+}
+
+class GdalDemSource final : public DemSource {
+public:
+    GdalDemSource(std::string open_name, DemInfo info)
+        : open_name_(std::move(open_name)), info_(std::move(info)) {
+        GDALDatasetUniquePtr ds = open_dataset();
+        GDALRasterBand* band = ds->GetRasterBand(1);
+        data_type_ = band->GetRasterDataType();
+        if (const OGRSpatialReference* srs = ds->GetSpatialRef()) {
+            srs_ = *srs;
+            srs_.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+            has_srs_ = true;
+            ellipsoidal_ = srs_.IsGeographic() && srs_.GetAxesCount() == 3;
+        }
+        georeferenced_ = has_srs_ && info_.has_geotransform;
+        if (info_.has_geotransform) {
+            if (!GDALInvGeoTransform(info_.geotransform.data(), inverse_.data())) {
+                throw InputError(info_.path + ": its geotransform cannot be inverted; fix the "
+                                              "georeferencing");
+            }
+        }
+        if (georeferenced_) {
+            compute_footprint();
+        }
+        release(std::make_unique<Handle>(Handle{std::move(ds), {}, {}}));
+    }
+
+    const DemInfo& info() const override { return info_; }
+    bool georeferenced() const override { return georeferenced_; }
+    LonLatBox footprint() const override {
+        TB_ASSERT(georeferenced_);
+        return footprint_;
+    }
+    bool ellipsoidal_heights() const override { return ellipsoidal_; }
+
+    double pixels_per_sample(Scheme scheme, int z, int size) const override {
+        TB_ASSERT(georeferenced_);
+        const double tiles = static_cast<double>(std::int64_t{1} << z);
+        const auto& g = info_.geotransform;
+        if (scheme == Scheme::Geodetic && info_.geographic) {
+            const double step = 180.0 / tiles / size;
+            return step / std::sqrt(std::abs(g[1] * g[5] - g[2] * g[4]));
+        }
+        const double lat = 0.5 * (footprint_.south + footprint_.north) * kPi / 180.0;
+        const double spacing_m =
+            scheme == Scheme::Geodetic
+                ? 180.0 / tiles / size * kMetresPerDegree * std::sqrt(std::cos(lat))
+                : 2 * kPi * 6378137.0 / tiles / size * std::cos(lat);
+        return spacing_m / info_.resolution_m;
+    }
+
+    LatticeBlock sample(Scheme scheme,
+                        int z,
+                        int size,
+                        std::int64_t column0,
+                        std::int64_t row0,
+                        int width,
+                        int height) const override;
+
+    core::HeightGrid read_all() const override;
+
+private:
+    struct Handle {
+        GDALDatasetUniquePtr ds;
+        // Scheme CRS -> source CRS, created on first use; null = identity.
+        std::unique_ptr<OGRCoordinateTransformation> transform[2];
+        bool transform_ready[2] = {false, false};
+    };
+    struct HandleReturn {
+        const GdalDemSource* owner;
+        void operator()(Handle* h) const { owner->release(std::unique_ptr<Handle>(h)); }
+    };
+    using Lease = std::unique_ptr<Handle, HandleReturn>;
+
+    GDALDatasetUniquePtr open_dataset() const {
+        CPLErrorReset();
+        GDALDatasetUniquePtr ds(GDALDataset::Open(
+            open_name_.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY, nullptr, nullptr, nullptr));
+        if (!ds) {
+            throw IoError(info_.path + ": cannot be reopened (" + gdal_message() + ")");
+        }
+        return ds;
+    }
+
+    Lease acquire() const {
+        {
+            std::lock_guard lock(mutex_);
+            if (!idle_.empty()) {
+                Handle* h = idle_.back().release();
+                idle_.pop_back();
+                return Lease(h, HandleReturn{this});
+            }
+        }
+        auto h = std::make_unique<Handle>(Handle{open_dataset(), {}, {}});
+        return Lease(h.release(), HandleReturn{this});
+    }
+
+    void release(std::unique_ptr<Handle> h) const {
+        std::lock_guard lock(mutex_);
+        idle_.push_back(std::move(h));
+    }
+
+    OGRCoordinateTransformation* transform_for(Handle& h, Scheme scheme) const {
+        const int k = scheme == Scheme::Geodetic ? 0 : 1;
+        if (!h.transform_ready[k]) {
+            OGRSpatialReference from = scheme_srs(scheme);
+            const char* options[] = {"IGNORE_DATA_AXIS_TO_SRS_AXIS_MAPPING=YES", nullptr};
+            if (!from.IsSame(&srs_, options)) {
+                h.transform[k].reset(OGRCreateCoordinateTransformation(&from, &srs_));
+                if (!h.transform[k]) {
+                    throw InputError(info_.path + ": no transformation from " +
+                                     (scheme == Scheme::Geodetic ? "EPSG:4326" : "EPSG:3857") +
+                                     " to the DEM's CRS (" + gdal_message() + ")");
+                }
+            }
+            h.transform_ready[k] = true;
+        }
+        return h.transform[k].get();
+    }
+
+    void compute_footprint() {
+        OGRSpatialReference wgs84 = scheme_srs(Scheme::Geodetic);
+        std::unique_ptr<OGRCoordinateTransformation> ct(
+            OGRCreateCoordinateTransformation(&srs_, &wgs84));
+        if (!ct) {
+            throw InputError(info_.path + ": its CRS cannot be transformed to WGS84 lon/lat (" +
+                             gdal_message() + "); tiles need a CRS PROJ understands");
+        }
+        // The hull of the pixel centres, densified so projected outlines bound the data.
+        const auto& g = info_.geotransform;
+        const double u0 = 0.5, u1 = info_.width - 0.5, v0 = 0.5, v1 = info_.height - 0.5;
+        constexpr int kSteps = 64;
+        double west = INFINITY, south = INFINITY, east = -INFINITY, north = -INFINITY;
+        for (int i = 0; i <= kSteps; ++i) {
+            const double f = static_cast<double>(i) / kSteps;
+            const double pts[4][2] = {{u0 + f * (u1 - u0), v0},
+                                      {u0 + f * (u1 - u0), v1},
+                                      {u0, v0 + f * (v1 - v0)},
+                                      {u1, v0 + f * (v1 - v0)}};
+            for (const auto& p : pts) {
+                double x = g[0] + p[0] * g[1] + p[1] * g[2];
+                double y = g[3] + p[0] * g[4] + p[1] * g[5];
+                if (ct->Transform(1, &x, &y) && std::isfinite(x) && std::isfinite(y)) {
+                    west = std::min(west, x), east = std::max(east, x);
+                    south = std::min(south, y), north = std::max(north, y);
+                }
+            }
+        }
+        if (!(west <= east && south <= north)) {
+            throw InputError(info_.path + ": its extent does not transform to lon/lat; check "
+                                          "the CRS and geotransform");
+        }
+        footprint_ = {std::max(west, -180.0),
+                      std::max(south, -90.0),
+                      std::min(east, 180.0),
+                      std::min(north, 90.0)};
+    }
+
+    // Height of a raw sample, or NaN for nodata.
+    double to_height(double raw) const {
+        if (!std::isfinite(raw)) {
+            return NAN;
+        }
+        if (info_.nodata) {
+            const double nd = *info_.nodata;
+            if (raw == nd) {
+                return NAN;
+            }
+            if (data_type_ == GDT_Float32 && static_cast<float>(raw) == static_cast<float>(nd)) {
+                return NAN;
+            }
+        }
+        return raw * info_.scale + info_.offset;
+    }
+
+    std::string open_name_;
+    DemInfo info_;
+    GDALDataType data_type_ = GDT_Unknown;
+    OGRSpatialReference srs_;
+    bool has_srs_ = false, georeferenced_ = false, ellipsoidal_ = false;
+    std::array<double, 6> inverse_{};
+    LonLatBox footprint_;
+    mutable std::mutex mutex_;
+    mutable std::vector<std::unique_ptr<Handle>> idle_;
+};
+
+LatticeBlock GdalDemSource::sample(Scheme scheme,
+                                   int z,
+                                   int size,
+                                   std::int64_t column0,
+                                   std::int64_t row0,
+                                   int width,
+                                   int height) const {
+    TB_ASSERT(georeferenced_ && width > 0 && height > 0);
+    LatticeBlock out;
+    out.column0 = column0, out.row0 = row0, out.width = width, out.height = height;
+    const std::size_t n = static_cast<std::size_t>(width) * height;
+    out.heights.assign(n, 0.0);
+    out.valid.assign(n, 0);
+
+    Lease h = acquire();
+    // Lattice points in the scheme's CRS, then in the source's.
+    std::vector<double> xs(n), ys(n);
+    std::vector<int> ok(n, 1);
+    for (int j = 0; j < height; ++j) {
+        const double y = lattice_y(scheme, z, size, row0 + j);
+        for (int i = 0; i < width; ++i) {
+            xs[static_cast<std::size_t>(j) * width + i] = lattice_x(scheme, z, size, column0 + i);
+            ys[static_cast<std::size_t>(j) * width + i] = y;
+        }
+    }
+    if (OGRCoordinateTransformation* ct = transform_for(*h, scheme)) {
+        ct->Transform(static_cast<int>(n), xs.data(), ys.data(), nullptr, ok.data());
+    }
+
+    // Reduced view of the source for this zoom: every f-th pixel, f = 2^k <= pixels per
+    // sample, pixel I of the view being source pixel P(I) = min(I f + f/2, W - 1). It depends on
+    // the zoom only, so every tile of the zoom interpolates the same values.
+    const double pps = pixels_per_sample(scheme, z, size);
+    int f = 1;
+    while (f * 2 <= pps && f < (1 << 20)) {
+        f *= 2;
+    }
+    const int W = info_.width, H = info_.height;
+    const int wr = (W + f - 1) / f, hr = (H + f - 1) / f;
+    const auto pick = [f](int i, int limit) { return std::min(i * f + f / 2, limit - 1); };
+
+    // Pixel-centre coordinates (u, v) of each point, and the window of the view they need.
+    std::vector<double> us(n), vs(n);
+    int i_min = wr, i_max = -1, j_min = hr, j_max = -1;
+    const auto cell = [f](double u, int count) {
+        if (count < 2) {
+            return 0;
+        }
+        const int i = static_cast<int>(std::floor((u - f / 2) / f));
+        return std::clamp(i, 0, count - 2);
+    };
+    const auto& t = inverse_;
+    for (std::size_t k = 0; k < n; ++k) {
+        if (!ok[k] || !std::isfinite(xs[k]) || !std::isfinite(ys[k])) {
+            ok[k] = 0;
+            continue;
+        }
+        const double u = t[0] + xs[k] * t[1] + ys[k] * t[2] - 0.5;
+        const double v = t[3] + xs[k] * t[4] + ys[k] * t[5] - 0.5;
+        // Inside the pixel-area extent of the source (half a pixel beyond the outer centres).
+        if (!(u >= -0.5 && u <= W - 0.5 && v >= -0.5 && v <= H - 0.5)) {
+            ok[k] = 0;
+            continue;
+        }
+        us[k] = u, vs[k] = v;
+        const int i = cell(u, wr), j = cell(v, hr);
+        i_min = std::min(i_min, i), i_max = std::max(i_max, std::min(i + 1, wr - 1));
+        j_min = std::min(j_min, j), j_max = std::max(j_max, std::min(j + 1, hr - 1));
+    }
+    if (i_max < 0) {
+        return out; // no lattice point inside the source
+    }
+
+    // Read the window of the view: one RasterIO at full resolution, or one per view row.
+    const int ww = i_max - i_min + 1, wh = j_max - j_min + 1;
+    std::vector<double> view(static_cast<std::size_t>(ww) * wh);
+    GDALRasterBand* band = h->ds->GetRasterBand(1);
+    CPLErrorReset();
+    if (f == 1) {
+        if (band->RasterIO(
+                GF_Read, i_min, j_min, ww, wh, view.data(), ww, wh, GDT_Float64, 0, 0, nullptr) !=
+            CE_None) {
+            throw IoError(info_.path + ": read failed (" + gdal_message() + ")");
+        }
+    } else {
+        const int c0 = pick(i_min, W), c1 = pick(i_max, W);
+        std::vector<double> row(static_cast<std::size_t>(c1 - c0 + 1));
+        for (int j = j_min; j <= j_max; ++j) {
+            if (band->RasterIO(GF_Read,
+                               c0,
+                               pick(j, H),
+                               c1 - c0 + 1,
+                               1,
+                               row.data(),
+                               c1 - c0 + 1,
+                               1,
+                               GDT_Float64,
+                               0,
+                               0,
+                               nullptr) != CE_None) {
+                throw IoError(info_.path + ": read failed (" + gdal_message() + ")");
+            }
+            for (int i = i_min; i <= i_max; ++i) {
+                view[static_cast<std::size_t>(j - j_min) * ww + (i - i_min)] = row[pick(i, W) - c0];
+            }
+        }
+    }
+    for (double& value : view) {
+        value = to_height(value);
+    }
+
+    // Bilinear interpolation. A sample is void when the pixel nearest to it is nodata (so a
+    // void keeps the footprint of its nodata pixels); otherwise nodata neighbours drop out and
+    // the weights are renormalized, as GDAL's warper does.
+    for (std::size_t k = 0; k < n; ++k) {
+        if (!ok[k]) {
+            continue;
+        }
+        const int i = cell(us[k], wr), j = cell(vs[k], hr);
+        const int i1 = std::min(i + 1, wr - 1), j1 = std::min(j + 1, hr - 1);
+        const double cu0 = pick(i, W), cu1 = pick(i1, W), cv0 = pick(j, H), cv1 = pick(j1, H);
+        const double a = cu1 > cu0 ? std::clamp((us[k] - cu0) / (cu1 - cu0), 0.0, 1.0) : 0.0;
+        const double b = cv1 > cv0 ? std::clamp((vs[k] - cv0) / (cv1 - cv0), 0.0, 1.0) : 0.0;
+        const int ci[4] = {i, i1, i, i1}, cj[4] = {j, j, j1, j1};
+        const double w[4] = {(1 - a) * (1 - b), a * (1 - b), (1 - a) * b, a * b};
+        const int nearest = (a < 0.5 ? 0 : 1) + (b < 0.5 ? 0 : 2);
+        if (std::isnan(
+                view[static_cast<std::size_t>(cj[nearest] - j_min) * ww + (ci[nearest] - i_min)])) {
+            continue;
+        }
+        double sum = 0, weights = 0;
+        for (int q = 0; q < 4; ++q) {
+            if (w[q] <= 0) {
+                continue;
+            }
+            const double value =
+                view[static_cast<std::size_t>(cj[q] - j_min) * ww + (ci[q] - i_min)];
+            if (std::isnan(value)) {
+                continue;
+            }
+            sum += w[q] * value;
+            weights += w[q];
+        }
+        if (weights > 0) {
+            out.heights[k] = sum / weights;
+            out.valid[k] = 1;
+        }
+    }
+    return out;
+}
+
+core::HeightGrid GdalDemSource::read_all() const {
+    const int W = info_.width, H = info_.height;
+    if (static_cast<double>(W) * H > 400e6) {
+        throw InputError(info_.path + ": " + std::to_string(W) + " x " + std::to_string(H) +
+                         " samples is too large to mesh whole; cut it into tiles (terrabound "
+                         "tile/build)");
+    }
+    Lease h = acquire();
+    const std::size_t n = static_cast<std::size_t>(W) * H;
+    std::vector<double> raw(n);
+    CPLErrorReset();
+    if (h->ds->GetRasterBand(1)->RasterIO(
+            GF_Read, 0, 0, W, H, raw.data(), W, H, GDT_Float64, 0, 0, nullptr) != CE_None) {
+        throw IoError(info_.path + ": read failed (" + gdal_message() + ")");
+    }
+    std::vector<std::uint8_t> valid(n, 0);
+    bool any = false;
+    for (std::size_t k = 0; k < n; ++k) {
+        const double value = to_height(raw[k]);
+        if (std::isnan(value)) {
+            raw[k] = 0;
+        } else {
+            raw[k] = value;
+            valid[k] = 1;
+            any = true;
+        }
+    }
+    if (!any) {
+        throw InputError(info_.path + ": every sample of band 1 is nodata; nothing to mesh");
+    }
+    fill_voids(raw, valid, W, H, 0, 0.0);
+    core::HeightGrid grid;
+    grid.width = W, grid.height = H;
+    grid.heights.assign(raw.begin(), raw.end());
+    bool all_valid = std::all_of(valid.begin(), valid.end(), [](std::uint8_t v) { return v != 0; });
+    if (!all_valid) {
+        grid.valid = std::move(valid);
+    }
+    return grid;
+}
+
+} // namespace
+
+std::shared_ptr<const DemSource> DemSource::open(const std::vector<std::string>& paths) {
+    init_gdal();
+    if (paths.empty()) {
+        throw InputError("no DEM given; name at least one raster file");
+    }
+    std::vector<DemInfo> infos;
+    for (const auto& path : paths) {
+        infos.push_back(inspect_dem(path)); // InputError for missing/unreadable files
+        GDALDatasetUniquePtr ds(GDALDataset::Open(
+            path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY, nullptr, nullptr, nullptr));
+        if (!ds) {
+            throw InputError(path + ": not a raster GDAL can read (" + gdal_message() + ")");
+        }
+        check_band(path, *ds);
+    }
+    if (paths.size() == 1) {
+        return std::make_shared<GdalDemSource>(paths[0], infos[0]);
+    }
+
+    // Several files: one in-memory VRT mosaic. All must share one CRS and be georeferenced.
+    std::string names;
+    for (std::size_t k = 0; k < paths.size(); ++k) {
+        names += (k ? ", " : "") + paths[k];
+        if (!infos[k].has_geotransform || infos[k].crs_name.empty()) {
+            throw InputError(paths[k] + ": has no georeferencing; a mosaic of several DEMs needs "
+                                        "a CRS and geotransform in each");
+        }
+    }
+    {
+        GDALDatasetUniquePtr first(GDALDataset::Open(paths[0].c_str(), GDAL_OF_RASTER));
+        for (std::size_t k = 1; k < paths.size(); ++k) {
+            GDALDatasetUniquePtr other(GDALDataset::Open(paths[k].c_str(), GDAL_OF_RASTER));
+            const char* options[] = {"IGNORE_DATA_AXIS_TO_SRS_AXIS_MAPPING=YES", nullptr};
+            if (!first->GetSpatialRef() || !other->GetSpatialRef() ||
+                !first->GetSpatialRef()->IsSame(other->GetSpatialRef(), options)) {
+                throw InputError(paths[k] + ": its CRS differs from " + paths[0] +
+                                 "'s; reproject the DEMs to one CRS before mosaicking");
+            }
+        }
+    }
+    CslPtr argv(CSLAddString(nullptr, "-b"));
+    argv.reset(CSLAddString(argv.release(), "1"));
+    std::unique_ptr<GDALBuildVRTOptions, BuildVrtOptionsDeleter> options(
+        GDALBuildVRTOptionsNew(argv.get(), nullptr));
+    std::vector<const char*> sources;
+    for (const auto& p : paths) {
+        sources.push_back(p.c_str());
+    }
+    int usage_error = 0;
+    CPLErrorReset();
+    GDALDatasetUniquePtr vrt(GDALDataset::FromHandle(GDALBuildVRT("",
+                                                                  static_cast<int>(sources.size()),
+                                                                  nullptr,
+                                                                  sources.data(),
+                                                                  options.get(),
+                                                                  &usage_error)));
+    if (!vrt || usage_error) {
+        throw InputError(names + ": cannot be mosaicked (" + gdal_message() + ")");
+    }
+    char** xml = vrt->GetMetadata("xml:VRT");
+    if (!xml || !xml[0]) {
+        throw IoError(names + ": GDAL gave no VRT description of the mosaic");
+    }
+    const std::string open_name = xml[0];
+    DemInfo info = inspect_dem(open_name);
+    info.path = names;
+    return std::make_shared<GdalDemSource>(open_name, std::move(info));
+}
+
+void write_tile_raster_tiff(const TileRaster& raster, const std::string& path) {
+    init_gdal();
+    const int n = raster.grid.width;
+    TB_ASSERT(n == raster.size + 1 && raster.grid.height == n);
+    GDALDriver* driver = GetGDALDriverManager()->GetDriverByName("GTiff");
+    if (!driver) {
+        throw IoError(path + ": GDAL has no GTiff driver");
+    }
+    const std::string temp = path + ".tmp" + std::to_string(::getpid());
+    CslPtr create_options(CSLSetNameValue(nullptr, "COMPRESS", "DEFLATE"));
+    CPLErrorReset();
+    GDALDatasetUniquePtr ds(
+        driver->Create(temp.c_str(), n, n, 1, GDT_Float32, create_options.get()));
+    if (!ds) {
+        throw IoError(path + ": cannot create (" + gdal_message() + ")");
+    }
+    const auto fail = [&](const std::string& what) {
+        ds.reset();
+        std::remove(temp.c_str());
+        throw IoError(path + ": " + what + " (" + gdal_message() + ")");
+    };
+    // Sample (i, j) is the centre of pixel (i, j).
+    const std::int64_t c0 = tile_first_column(raster.scheme, raster.id, raster.size);
+    const std::int64_t r0 = tile_first_row(raster.scheme, raster.id, raster.size);
+    const double x0 = lattice_x(raster.scheme, raster.id.z, raster.size, c0);
+    const double y0 = lattice_y(raster.scheme, raster.id.z, raster.size, r0);
+    const double step = lattice_x(raster.scheme, raster.id.z, raster.size, c0 + 1) - x0;
+    double gt[6] = {x0 - step / 2, step, 0, y0 + step / 2, 0, -step};
+    OGRSpatialReference srs = scheme_srs(raster.scheme);
+    std::vector<float> heights = raster.grid.heights;
+    GDALRasterBand* band = ds->GetRasterBand(1);
+    if (ds->SetGeoTransform(gt) != CE_None || ds->SetSpatialRef(&srs) != CE_None) {
+        fail("cannot set georeferencing");
+    }
+    if (band->RasterIO(GF_Write, 0, 0, n, n, heights.data(), n, n, GDT_Float32, 0, 0, nullptr) !=
+        CE_None) {
+        fail("write failed");
+    }
+    if (!raster.grid.valid.empty()) {
+        // Inside the TIFF, not as a .msk sidecar the rename below would leave behind.
+        CPLSetThreadLocalConfigOption("GDAL_TIFF_INTERNAL_MASK", "YES");
+        const CPLErr masked = ds->CreateMaskBand(GMF_PER_DATASET);
+        CPLSetThreadLocalConfigOption("GDAL_TIFF_INTERNAL_MASK", nullptr);
+        if (masked != CE_None) {
+            fail("cannot create the void mask");
+        }
+        std::vector<std::uint8_t> mask(raster.grid.valid.size());
+        for (std::size_t k = 0; k < mask.size(); ++k) {
+            mask[k] = raster.grid.valid[k] ? 255 : 0;
+        }
+        if (band->GetMaskBand()->RasterIO(
+                GF_Write, 0, 0, n, n, mask.data(), n, n, GDT_Byte, 0, 0, nullptr) != CE_None) {
+            fail("cannot write the void mask");
+        }
+    }
+    CPLErrorReset();
+    ds.reset(); // flushes and closes; GDAL reports failures through the error state
+    if (CPLGetLastErrorType() == CE_Failure || CPLGetLastErrorType() == CE_Fatal) {
+        std::remove(temp.c_str());
+        throw IoError(path + ": write failed (" + gdal_message() + ")");
+    }
+    std::error_code ec;
+    std::filesystem::rename(temp, path, ec);
+    if (ec) {
+        std::remove(temp.c_str());
+        throw IoError(path + ": cannot rename the temporary file into place (" + ec.message() +
+                      ")");
+    }
+}
+
+FloatGrid read_float_grid(const std::string& path) {
+    init_gdal();
+    CPLErrorReset();
+    GDALDatasetUniquePtr ds(GDALDataset::Open(
+        path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY, nullptr, nullptr, nullptr));
+    if (!ds) {
+        throw InputError(path + ": cannot read the grid (" + gdal_message() +
+                         "); install it (Debian package proj-data)");
+    }
+    FloatGrid g;
+    g.width = ds->GetRasterXSize();
+    g.height = ds->GetRasterYSize();
+    if (ds->GetGeoTransform(g.geotransform.data()) != CE_None) {
+        throw InputError(path + ": the grid has no geotransform");
+    }
+    g.values.resize(static_cast<std::size_t>(g.width) * g.height);
+    if (ds->GetRasterBand(1)->RasterIO(GF_Read,
+                                       0,
+                                       0,
+                                       g.width,
+                                       g.height,
+                                       g.values.data(),
+                                       g.width,
+                                       g.height,
+                                       GDT_Float32,
+                                       0,
+                                       0,
+                                       nullptr) != CE_None) {
+        throw IoError(path + ": read failed (" + gdal_message() + ")");
+    }
+    return g;
+}
+
+} // namespace tb::tiler

@@ -1,0 +1,58 @@
+// EGM96 undulation from PROJ's egm96_15.gtx (721 x 1440 Float32, 0.25 degree cells whose
+// centres lie on multiples of 0.25 degree), read once with GDAL and interpolated bilinearly.
+#include "tiler/geoid.hpp"
+
+#include "core/error.hpp"
+#include "tiler/gdal_source.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <mutex>
+
+namespace tb::tiler {
+namespace {
+
+const FloatGrid& egm96_grid() {
+    static std::once_flag once;
+    static FloatGrid grid;
+    std::call_once(once, [] {
+        FloatGrid g = read_float_grid(kEgm96GridPath);
+        const auto& t = g.geotransform;
+        // The interpolation below relies on a global north-up grid with whole columns.
+        if (t[2] != 0 || t[4] != 0 || t[1] <= 0 || t[5] >= 0 ||
+            std::abs(t[1] * g.width - 360.0) > 1e-9) {
+            throw InputError(std::string(kEgm96GridPath) +
+                             ": not a global north-up geoid grid; reinstall proj-data");
+        }
+        grid = std::move(g);
+    });
+    return grid;
+}
+
+} // namespace
+
+double egm96_undulation(double lon, double lat) {
+    const FloatGrid& g = egm96_grid();
+    const auto& t = g.geotransform;
+    // Cell-centre coordinates: column c sits at lon t0 + (c + 0.5) t1.
+    double u = (lon - t[0]) / t[1] - 0.5;
+    double v = (std::clamp(lat, -90.0, 90.0) - t[3]) / t[5] - 0.5;
+    u = std::fmod(u, static_cast<double>(g.width));
+    if (u < 0) {
+        u += g.width;
+    }
+    v = std::clamp(v, 0.0, static_cast<double>(g.height - 1));
+    const int c0 = std::min(static_cast<int>(u), g.width - 1);
+    const int c1 = (c0 + 1) % g.width; // longitude wraps
+    const int r0 = std::min(static_cast<int>(v), g.height - 2);
+    const int r1 = r0 + 1;
+    const double fu = u - c0, fv = v - r0;
+    const auto at = [&](int c, int r) {
+        return static_cast<double>(g.values[static_cast<std::size_t>(r) * g.width + c]);
+    };
+    const double top = at(c0, r0) * (1 - fu) + at(c1, r0) * fu;
+    const double bottom = at(c0, r1) * (1 - fu) + at(c1, r1) * fu;
+    return top * (1 - fv) + bottom * fv;
+}
+
+} // namespace tb::tiler

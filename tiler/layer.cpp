@@ -1,0 +1,424 @@
+// A layer: DEM(s) -> tile raster -> core::triangulate -> encoded tile, plus the pyramid plan
+// (zoom range, eps ladder, tiles per zoom) shared by tile, build and serve.
+#include "tiler/layer.hpp"
+
+#include "core/error.hpp"
+#include "core/triangulate.hpp"
+#include "tiler/encode.hpp"
+#include "tiler/gdal_source.hpp"
+#include "tiler/geoid.hpp"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+namespace tb::tiler {
+namespace {
+
+// Samples read around a tile so that void filling near its border sees what its neighbours
+// see (fill_voids step 1 radius).
+constexpr int kFillMargin = 16;
+
+// Default eps at max_zoom: resolution / 45, i.e. 2 m for SRTM3 (~90 m), scaling with the
+// sample spacing like every level of the ladder. 2 m is a third of SRTM's relative vertical
+// accuracy (about 6 m, 90% linear error) and four times its 1 m integer quantization, so the
+// mesh error stays well below the data's own noise while the meshes stay small; it is also
+// far below CesiumJS's level geometric error (77067 m / 2^z, about 75 m at SRTM3's z = 10).
+constexpr double kResolutionPerEps = 45.0;
+constexpr double kMinEps = 0.001;
+
+std::string tile_name(const TileId& id) {
+    return std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
+}
+
+class DemLayer final : public Layer {
+public:
+    explicit DemLayer(const LayerOptions& options) : options_(options) {
+        validate_options();
+        source_ = DemSource::open(options_.sources);
+        const DemInfo& info = source_->info();
+        if (!source_->georeferenced()) {
+            throw InputError(info.path + ": has no georeferencing; tiles need a CRS and a "
+                                         "geotransform (terrabound mesh works without)");
+        }
+        if (!info.has_data) {
+            throw InputError(info.path + ": every sample of band 1 is nodata; there is nothing "
+                                         "to tile");
+        }
+        footprint_ = source_->footprint();
+        datum_ = options_.datum;
+        if (datum_ == VerticalDatum::Auto) {
+            datum_ =
+                source_->ellipsoidal_heights() ? VerticalDatum::Ellipsoid : VerticalDatum::Egm96;
+        }
+        plan_zooms();
+        finest_eps_ = options_.finest_eps
+                          ? *options_.finest_eps
+                          : std::max(kMinEps, info.resolution_m / kResolutionPerEps);
+        compute_height_range();
+    }
+
+    const LayerOptions& options() const override { return options_; }
+    int min_zoom() const override { return min_zoom_; }
+    int max_zoom() const override { return max_zoom_; }
+    double eps_for_zoom(int z) const override {
+        return finest_eps_ * std::ldexp(1.0, max_zoom_ - z);
+    }
+    LonLatBox data_bounds() const override { return footprint_; }
+    TileRange tiles_at(int z) const override {
+        if (z < min_zoom_ || z > max_zoom_) {
+            return TileRange{z, 0, 0, -1, -1};
+        }
+        return tiles_covering(options_.scheme, footprint_, z);
+    }
+    bool may_have_tile(const TileId& id) const override {
+        if (!is_valid(options_.scheme, id)) {
+            return false;
+        }
+        const TileRange r = tiles_at(id.z);
+        return !r.empty() && id.x >= r.x0 && id.x <= r.x1 && id.y >= r.y0 && id.y <= r.y1;
+    }
+
+    bool document(const std::string& path, std::string& out) const override {
+        TilesetSpec spec;
+        spec.layer = options_.name;
+        spec.scheme = options_.scheme;
+        spec.min_zoom = min_zoom_;
+        spec.max_zoom = max_zoom_;
+        spec.data_bounds = footprint_;
+        spec.min_height = min_height_;
+        spec.max_height = max_height_;
+        spec.eps_for_zoom = [this](int z) { return eps_for_zoom(z); };
+        spec.has_tile = [this](const TileId& id) { return may_have_tile(id); };
+        return tileset_document(spec, path, out);
+    }
+
+    std::string make_tile(const TileId& id, Format format, EpsChoice eps) const override {
+        double value = 0;
+        if (eps.level < 0) {
+            check_id(id);
+            value = eps_for_zoom(id.z);
+        } else if (static_cast<std::size_t>(eps.level) < options_.eps_levels.size()) {
+            value = options_.eps_levels[static_cast<std::size_t>(eps.level)];
+        } else {
+            throw InputError("layer '" + options_.name + "': eps level " +
+                             std::to_string(eps.level) + " does not exist (the layer has " +
+                             std::to_string(options_.eps_levels.size()) + ")");
+        }
+        return make_tile_at(id, format, value);
+    }
+
+    TileRaster make_raster(const TileId& id) const override;
+
+    std::string make_tile_at(const TileId& id, Format format, double eps) const override {
+        check_eps(eps, "eps");
+        const TileRaster raster = make_raster(id);
+        const ErrorBudget budget = error_budget(eps);
+        const core::Mesh mesh = mesh_tile(raster, budget.mesh_eps);
+        return encode_tile(raster, mesh, format, budget);
+    }
+
+    double min_height() const override { return min_height_; }
+    double max_height() const override { return max_height_; }
+    VerticalDatum source_datum() const override { return datum_; }
+
+private:
+    void validate_options() {
+        const auto& o = options_;
+        if (o.name.empty() || !std::all_of(o.name.begin(), o.name.end(), [](char c) {
+                return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-';
+            })) {
+            throw InputError("layer name '" + o.name +
+                             "': use letters, digits, '_' and '-' only (it goes into URLs)");
+        }
+        if (o.tile_size < 2 || o.tile_size > 4096) {
+            throw InputError("layer '" + o.name + "': tile size " + std::to_string(o.tile_size) +
+                             " is outside 2..4096 samples");
+        }
+        for (const auto& z : {o.min_zoom, o.max_zoom}) {
+            if (z && (*z < 0 || *z > kMaxZoom)) {
+                throw InputError("layer '" + o.name + "': zoom " + std::to_string(*z) +
+                                 " is outside 0.." + std::to_string(kMaxZoom));
+            }
+        }
+        if (o.min_zoom && o.max_zoom && *o.min_zoom > *o.max_zoom) {
+            throw InputError("layer '" + o.name + "': min zoom " + std::to_string(*o.min_zoom) +
+                             " is above max zoom " + std::to_string(*o.max_zoom));
+        }
+        if (o.finest_eps) {
+            check_eps(*o.finest_eps, "layer '" + o.name + "': finest eps");
+        }
+        for (double e : o.eps_levels) {
+            check_eps(e, "layer '" + o.name + "': eps level");
+        }
+    }
+
+    // max_zoom: the first zoom whose lattice spacing reaches the source's pixel size.
+    // min_zoom: the deepest zoom at which the data still spans at most 2 x 2 tiles.
+    void plan_zooms() {
+        int max_z = kMaxZoom;
+        for (int z = 0; z <= kMaxZoom; ++z) {
+            if (source_->pixels_per_sample(options_.scheme, z, options_.tile_size) <= 1.0 + 1e-9) {
+                max_z = z;
+                break;
+            }
+        }
+        if (options_.max_zoom) {
+            max_z = *options_.max_zoom;
+        }
+        int min_z = 0;
+        for (int z = 0; z <= max_z; ++z) {
+            if (tiles_covering(options_.scheme, footprint_, z).count() <= 4) {
+                min_z = z;
+            }
+        }
+        if (options_.min_zoom) {
+            min_z = *options_.min_zoom;
+        }
+        if (min_z > max_z) {
+            throw InputError("layer '" + options_.name + "': min zoom " + std::to_string(min_z) +
+                             " is above max zoom " + std::to_string(max_z));
+        }
+        if (tiles_covering(options_.scheme, footprint_, max_z).empty()) {
+            throw InputError(source_->info().path + ": lies outside the " +
+                             to_string(options_.scheme) + " scheme's extent");
+        }
+        min_zoom_ = min_z;
+        max_zoom_ = max_z;
+    }
+
+    // Ellipsoidal range of every sample a tile can hold: the data's range, sea level where
+    // voids may be filled with it, plus the geoid's range over the footprint.
+    void compute_height_range() {
+        const DemInfo& info = source_->info();
+        double lo = info.min_height, hi = info.max_height;
+        // Voids (nodata, or bounding-box corners of a projected DEM) may lie at 0 m orthometric.
+        if (info.nodata || !info.geographic) {
+            lo = std::min(lo, 0.0);
+            hi = std::max(hi, 0.0);
+        }
+        double n_lo = INFINITY, n_hi = -INFINITY;
+        constexpr int kSteps = 32;
+        for (int j = 0; j <= kSteps; ++j) {
+            for (int i = 0; i <= kSteps; ++i) {
+                const double lon =
+                    footprint_.west + (footprint_.east - footprint_.west) * i / kSteps;
+                const double lat =
+                    footprint_.south + (footprint_.north - footprint_.south) * j / kSteps;
+                const double n = egm96_undulation(lon, lat);
+                n_lo = std::min(n_lo, n), n_hi = std::max(n_hi, n);
+            }
+        }
+        // Between the probes the 15' geoid grid can vary a little more; 2 m covers it.
+        if (datum_ == VerticalDatum::Egm96) {
+            lo += n_lo - 2, hi += n_hi + 2;
+        } else if (info.nodata || !info.geographic) {
+            lo = std::min(lo, n_lo - 2), hi = std::max(hi, n_hi + 2);
+        }
+        min_height_ = lo - 1;
+        max_height_ = hi + 1;
+    }
+
+    void check_id(const TileId& id) const {
+        if (!is_valid(options_.scheme, id)) {
+            throw InputError("tile " + tile_name(id) + ": outside the " +
+                             to_string(options_.scheme) + " scheme (z 0.." +
+                             std::to_string(kMaxZoom) + ", x and y within the zoom's tiles)");
+        }
+        if (!may_have_tile(id)) {
+            throw NotFound("tile " + tile_name(id) + ": layer '" + options_.name +
+                           "' has no data there (zooms " + std::to_string(min_zoom_) + ".." +
+                           std::to_string(max_zoom_) + ")");
+        }
+    }
+
+    LayerOptions options_;
+    std::shared_ptr<const DemSource> source_;
+    LonLatBox footprint_;
+    VerticalDatum datum_ = VerticalDatum::Egm96;
+    int min_zoom_ = 0, max_zoom_ = 0;
+    double finest_eps_ = 1;
+    double min_height_ = 0, max_height_ = 0;
+};
+
+TileRaster DemLayer::make_raster(const TileId& id) const {
+    check_id(id);
+    const Scheme scheme = options_.scheme;
+    const int n = options_.tile_size;
+    const int m = kFillMargin;
+    const int w = n + 1 + 2 * m;
+    const std::int64_t c0 = tile_first_column(scheme, id, n) - m;
+    const std::int64_t r0 = tile_first_row(scheme, id, n) - m;
+    LatticeBlock block = source_->sample(scheme, id.z, n, c0, r0, w, w);
+
+    // Undulation of every lattice point (the same for a point in every tile that holds it).
+    std::vector<double> undulation(block.heights.size());
+    for (int j = 0; j < w; ++j) {
+        const double y = lattice_y(scheme, id.z, n, r0 + j);
+        for (int i = 0; i < w; ++i) {
+            const LonLat p = native_to_lonlat(scheme, lattice_x(scheme, id.z, n, c0 + i), y);
+            undulation[static_cast<std::size_t>(j) * w + i] = egm96_undulation(p.lon, p.lat);
+        }
+    }
+    // Fill voids in orthometric heights, so data-free areas sit on the geoid (sea level).
+    std::vector<double> ortho = block.heights;
+    if (datum_ == VerticalDatum::Ellipsoid) {
+        for (std::size_t k = 0; k < ortho.size(); ++k) {
+            ortho[k] -= block.valid[k] ? undulation[k] : 0.0;
+        }
+    }
+    fill_voids(ortho, block.valid, w, w, m, 0.0);
+
+    TileRaster raster;
+    raster.id = id;
+    raster.scheme = scheme;
+    raster.bounds = tile_bounds(scheme, id);
+    raster.size = n;
+    raster.grid.width = n + 1;
+    raster.grid.height = n + 1;
+    raster.grid.heights.resize(static_cast<std::size_t>(n + 1) * (n + 1));
+    std::vector<std::uint8_t> valid(raster.grid.heights.size());
+    bool all_valid = true;
+    for (int j = 0; j <= n; ++j) {
+        for (int i = 0; i <= n; ++i) {
+            const std::size_t k = static_cast<std::size_t>(j + m) * w + (i + m);
+            const std::size_t t = static_cast<std::size_t>(j) * (n + 1) + i;
+            const bool measured = block.valid[k] != 0;
+            double h = ortho[k] + undulation[k];
+            if (datum_ == VerticalDatum::Ellipsoid && measured) {
+                h = block.heights[k]; // the source's own ellipsoidal height, untouched
+            }
+            raster.grid.heights[t] = static_cast<float>(h);
+            valid[t] = measured ? 1 : 0;
+            all_valid = all_valid && measured;
+        }
+    }
+    if (!all_valid) {
+        raster.grid.valid = std::move(valid);
+    }
+    return raster;
+}
+
+} // namespace
+
+std::shared_ptr<const Layer> Layer::open(const LayerOptions& options) {
+    return std::make_shared<DemLayer>(options);
+}
+
+void check_eps(double eps, const std::string& what) {
+    if (!std::isfinite(eps) || eps < kMinEps) {
+        std::ostringstream text;
+        text << what << ": " << eps
+             << " m is not a usable error bound; give a finite eps of at least 0.001 m";
+        throw InputError(text.str());
+    }
+}
+
+core::Mesh mesh_tile(const TileRaster& raster, double mesh_eps) {
+    return core::triangulate(raster.grid, core::TriangulateOptions{mesh_eps, true});
+}
+
+std::string mesh_to_obj(const core::Mesh& mesh) {
+    std::string out;
+    out.reserve(mesh.points.size() * 32 + mesh.triangles.size() * 8);
+    char line[96];
+    for (std::size_t v = 0; v < mesh.points.size(); ++v) {
+        std::snprintf(line,
+                      sizeof line,
+                      "v %d %d %.9g\n",
+                      mesh.points[v].x,
+                      mesh.points[v].y,
+                      static_cast<double>(mesh.z[v]));
+        out += line;
+    }
+    for (std::size_t e = 0; e + 2 < mesh.triangles.size(); e += 3) {
+        std::snprintf(line,
+                      sizeof line,
+                      "f %u %u %u\n",
+                      mesh.triangles[e] + 1,
+                      mesh.triangles[e + 1] + 1,
+                      mesh.triangles[e + 2] + 1);
+        out += line;
+    }
+    return out;
+}
+
+std::string mesh_to_json(const core::Mesh& mesh) {
+    std::string out = "{\"vertices\":[";
+    char number[64];
+    for (std::size_t v = 0; v < mesh.points.size(); ++v) {
+        std::snprintf(number,
+                      sizeof number,
+                      "%s%d,%d,%.9g",
+                      v ? "," : "",
+                      mesh.points[v].x,
+                      mesh.points[v].y,
+                      static_cast<double>(mesh.z[v]));
+        out += number;
+    }
+    out += "],\"triangles\":[";
+    for (std::size_t e = 0; e < mesh.triangles.size(); ++e) {
+        std::snprintf(number, sizeof number, "%s%u", e ? "," : "", mesh.triangles[e]);
+        out += number;
+    }
+    out += "]}\n";
+    return out;
+}
+
+void write_file_atomically(const std::string& path, std::string_view bytes) {
+    const std::string temp = path + ".tmp" + std::to_string(::getpid());
+    {
+        std::ofstream out(temp, std::ios::binary | std::ios::trunc);
+        if (!out) {
+            throw IoError(path + ": cannot create a temporary file next to it (" +
+                          std::strerror(errno) + ")");
+        }
+        out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+        out.flush();
+        if (!out) {
+            std::remove(temp.c_str());
+            throw IoError(path + ": write failed (" + std::strerror(errno) + ")");
+        }
+    }
+    std::error_code ec;
+    std::filesystem::rename(temp, path, ec);
+    if (ec) {
+        std::remove(temp.c_str());
+        throw IoError(path + ": cannot rename the temporary file into place (" + ec.message() +
+                      ")");
+    }
+}
+
+VerticalDatum parse_datum(const std::string& name) {
+    if (name == "auto") {
+        return VerticalDatum::Auto;
+    }
+    if (name == "egm96") {
+        return VerticalDatum::Egm96;
+    }
+    if (name == "ellipsoid") {
+        return VerticalDatum::Ellipsoid;
+    }
+    throw InputError("datum '" + name + "': expected 'auto', 'egm96' or 'ellipsoid'");
+}
+
+const char* to_string(VerticalDatum datum) {
+    switch (datum) {
+    case VerticalDatum::Auto:
+        return "auto";
+    case VerticalDatum::Egm96:
+        return "egm96";
+    case VerticalDatum::Ellipsoid:
+        return "ellipsoid";
+    }
+    return "?";
+}
+
+} // namespace tb::tiler

@@ -1,0 +1,127 @@
+// Tile pyramid arithmetic: geodetic (EPSG:4326, 2x1 roots, TMS) and mercator (EPSG:3857, XYZ).
+#include "tiler/tile_grid.hpp"
+
+#include "core/error.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace tb::tiler {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr double kEarthRadius = 6378137.0;            // EPSG:3857 sphere
+constexpr double kMercatorHalf = kPi * kEarthRadius;  // 20037508.342789244 m
+constexpr double kMercatorMaxLat = 85.05112877980659; // atan(sinh(pi)) in degrees
+
+double mercator_y_to_lat(double y) {
+    return std::atan(std::sinh(y / kEarthRadius)) * 180.0 / kPi;
+}
+
+double lat_to_mercator_y(double lat) {
+    const double phi = std::clamp(lat, -kMercatorMaxLat, kMercatorMaxLat) * kPi / 180.0;
+    return kEarthRadius * std::log(std::tan(kPi / 4 + phi / 2));
+}
+
+// Index range [i0, i1] of the cells of width `step` starting at `origin` that the open
+// interval (lo, hi) overlaps, clamped to [0, n-1]. A box that only touches a cell's edge does
+// not select that cell.
+void cells_overlapping(double lo,
+                       double hi,
+                       double origin,
+                       double step,
+                       std::int64_t n,
+                       std::int64_t& i0,
+                       std::int64_t& i1) {
+    const double a = (lo - origin) / step;
+    const double b = (hi - origin) / step;
+    i0 = static_cast<std::int64_t>(std::floor(a));
+    i1 = static_cast<std::int64_t>(std::ceil(b)) - 1;
+    i0 = std::clamp<std::int64_t>(i0, 0, n - 1);
+    i1 = std::clamp<std::int64_t>(i1, -1, n - 1);
+}
+
+} // namespace
+
+Scheme parse_scheme(std::string_view name) {
+    if (name == "geodetic") {
+        return Scheme::Geodetic;
+    }
+    if (name == "mercator") {
+        return Scheme::Mercator;
+    }
+    throw InputError("scheme '" + std::string(name) + "': expected 'geodetic' or 'mercator'");
+}
+
+const char* to_string(Scheme scheme) {
+    return scheme == Scheme::Geodetic ? "geodetic" : "mercator";
+}
+
+std::int64_t tiles_across(Scheme scheme, int z) {
+    TB_ASSERT(z >= 0 && z <= kMaxZoom);
+    return scheme == Scheme::Geodetic ? (std::int64_t{2} << z) : (std::int64_t{1} << z);
+}
+
+std::int64_t tiles_down(Scheme, int z) {
+    TB_ASSERT(z >= 0 && z <= kMaxZoom);
+    return std::int64_t{1} << z;
+}
+
+bool is_valid(Scheme scheme, const TileId& id) {
+    if (id.z < 0 || id.z > kMaxZoom) {
+        return false;
+    }
+    return id.x >= 0 && id.y >= 0 && id.x < tiles_across(scheme, id.z) &&
+           id.y < tiles_down(scheme, id.z);
+}
+
+LonLatBox tile_bounds(Scheme scheme, const TileId& id) {
+    TB_ASSERT(is_valid(scheme, id));
+    if (scheme == Scheme::Geodetic) {
+        const double w = 180.0 / static_cast<double>(std::int64_t{1} << id.z);
+        return {-180.0 + static_cast<double>(id.x) * w,
+                -90.0 + static_cast<double>(id.y) * w,
+                -180.0 + static_cast<double>(id.x + 1) * w,
+                -90.0 + static_cast<double>(id.y + 1) * w};
+    }
+    const double w = 2 * kMercatorHalf / static_cast<double>(std::int64_t{1} << id.z);
+    const double west = -kMercatorHalf + static_cast<double>(id.x) * w;
+    const double east = -kMercatorHalf + static_cast<double>(id.x + 1) * w;
+    const double north = kMercatorHalf - static_cast<double>(id.y) * w;
+    const double south = kMercatorHalf - static_cast<double>(id.y + 1) * w;
+    return {west * 180.0 / kMercatorHalf,
+            mercator_y_to_lat(south),
+            east * 180.0 / kMercatorHalf,
+            mercator_y_to_lat(north)};
+}
+
+TileRange tiles_covering(Scheme scheme, const LonLatBox& box, int z) {
+    TB_ASSERT(z >= 0 && z <= kMaxZoom);
+    TileRange range;
+    range.z = z;
+    if (!(box.west < box.east) || !(box.south < box.north)) {
+        return range; // empty (also for NaN)
+    }
+    const std::int64_t nx = tiles_across(scheme, z);
+    const std::int64_t ny = tiles_down(scheme, z);
+    if (scheme == Scheme::Geodetic) {
+        const double w = 180.0 / static_cast<double>(std::int64_t{1} << z);
+        cells_overlapping(box.west, box.east, -180.0, w, nx, range.x0, range.x1);
+        cells_overlapping(box.south, box.north, -90.0, w, ny, range.y0, range.y1);
+        return range;
+    }
+    const double w = 2 * kMercatorHalf / static_cast<double>(std::int64_t{1} << z);
+    const double west = box.west / 180.0 * kMercatorHalf;
+    const double east = box.east / 180.0 * kMercatorHalf;
+    cells_overlapping(west, east, -kMercatorHalf, w, nx, range.x0, range.x1);
+    // Rows count from the north: row r spans y in [H - (r+1)w, H - r w].
+    const double north = lat_to_mercator_y(box.north);
+    const double south = lat_to_mercator_y(box.south);
+    if (!(south < north)) {
+        return TileRange{z, 0, 0, -1, -1}; // box entirely beyond the mercator latitude limit
+    }
+    cells_overlapping(-north, -south, -kMercatorHalf, w, ny, range.y0, range.y1);
+    return range;
+}
+
+} // namespace tb::tiler
