@@ -107,7 +107,7 @@ std::string help_text(const CommandSpec& spec) {
             out << "  " << left;
             out << std::string(left.size() < 22 ? 22 - left.size() : 1, ' ') << o.help << "\n";
         }
-        out << "  -h, --help              show this help\n";
+        out << "  -h, --help            show this help\n";
     }
     if (!spec.details.empty()) {
         out << "\n" << spec.details << "\n";
