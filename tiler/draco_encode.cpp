@@ -1,0 +1,453 @@
+// Encoding a meshed tile with Draco: glTF 2.0 binary with KHR_draco_mesh_compression (.glb)
+// and raw Draco with geometry metadata (.drc). Draco's Status becomes a tb error here.
+//
+// Quantization is explicit and level-wide: every position is snapped, in double precision, to
+// the lattice s*Z^3 of error_budget(eps), and Draco is told to quantize on exactly that
+// lattice (origin a lattice point, range s*(2^bits - 1)). Draco then stores the lattice
+// indices and dequantizes them as float(q) * s + origin, which is exact in float32 while
+// q < 2^23 (s is a power of two; see kMaxLatticeBits and Snapped). The glb's frame origin
+// (node translation) is itself a lattice point, so translation + decoded position is the
+// snapped ECEF point, identical in every tile that holds the vertex. Before writing, the tile
+// is decoded and checked against every valid sample (snapped_error, then a Draco round trip).
+#include "tiler/draco_decode.hpp"
+#include "tiler/encode.hpp"
+#include "tiler/geodesy.hpp"
+#include "tiler/log.hpp"
+
+#include "core/error.hpp"
+
+#include <draco/compression/decode.h>
+#include <draco/compression/encode.h>
+#include <draco/mesh/mesh.h>
+#include <draco/metadata/geometry_metadata.h>
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <memory>
+
+namespace tb::tiler {
+namespace {
+
+constexpr int kDracoSpeed = 5; // Draco's default trade-off; fixed for determinism
+// Draco quantizes with floor(v / s + 0.5f) in float32, exact only while v / s < 2^23 (above it
+// the + 0.5 rounds to even); float32 positions are exact below 2^24 steps.
+constexpr int kMaxLatticeBits = 23;
+constexpr std::uint32_t kGlbMagic = 0x46546C67; // "glTF"
+constexpr std::uint32_t kChunkJson = 0x4E4F534A;
+constexpr std::uint32_t kChunkBin = 0x004E4942;
+
+std::string tile_name(const TileId& id) {
+    return std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
+}
+
+void check(const draco::Status& status, const char* what, const TileId& id) {
+    if (!status.ok()) {
+        throw Error("tile " + tile_name(id) + ": Draco " + what + " failed: " +
+                    status.error_msg_string() + "; this is a bug, please report it with the tile");
+    }
+}
+
+// Shortest round-trip decimal form of a double (JSON numbers keep every bit).
+std::string number(double v) {
+    TB_ASSERT(std::isfinite(v));
+    char buf[32];
+    const auto r = std::to_chars(buf, buf + sizeof buf, v);
+    return std::string(buf, r.ptr);
+}
+
+void put_u32(std::string& out, std::uint32_t v) {
+    for (int k = 0; k < 4; ++k) {
+        out.push_back(static_cast<char>((v >> (8 * k)) & 0xFF));
+    }
+}
+
+// Vertices snapped to the lattice: q[v] are integer lattice coordinates (units of `step`) in
+// the output frame; Draco quantizes them on [origin, origin + (2^bits - 1)] * step.
+//
+// Draco 1.5 passes the explicit origin and range to its encoder as text through std::to_string
+// (6 decimals), then parses them back. A float survives that exactly when it is an integer
+// multiple of 2^-6 or at least 16 in magnitude (its spacing then exceeds the 1e-6 rounding).
+// So the origin is rounded down to a multiple of max(16 m, s) and the range made >= 16 m;
+// without this, small tiles at fine steps decoded a few 1e-7 m off the lattice.
+struct Snapped {
+    std::vector<std::array<std::int64_t, 3>> q;
+    std::array<std::int64_t, 3> lo{}, hi{}, origin{};
+    int bits = 1;
+};
+
+Snapped finish_lattice(const std::vector<std::array<std::int64_t, 3>>& q,
+                       double step,
+                       const TileRaster& raster,
+                       const ErrorBudget& budget) {
+    Snapped out;
+    out.q = q;
+    out.lo.fill(std::numeric_limits<std::int64_t>::max());
+    out.hi.fill(std::numeric_limits<std::int64_t>::min());
+    for (const auto& p : out.q) {
+        for (int k = 0; k < 3; ++k) {
+            out.lo[k] = std::min(out.lo[k], p[k]);
+            out.hi[k] = std::max(out.hi[k], p[k]);
+        }
+    }
+    constexpr double kTextSafe = 16.0; // metres; see above
+    const std::int64_t unit = std::max<std::int64_t>(1, std::llround(kTextSafe / step));
+    const std::int64_t min_range = unit; // (2^bits - 1) >= 16 m / step
+    std::int64_t extent = min_range;
+    std::int64_t magnitude = 0;
+    for (int k = 0; k < 3; ++k) {
+        // Floor division: the origin is at or below the smallest coordinate.
+        out.origin[k] =
+            (out.lo[k] >= 0 ? out.lo[k] / unit : -((-out.lo[k] + unit - 1) / unit)) * unit;
+        extent = std::max(extent, out.hi[k] - out.origin[k]);
+        magnitude = std::max({magnitude, -out.origin[k], out.hi[k]});
+    }
+    while (out.bits < 62 && (std::int64_t{1} << out.bits) - 1 < extent) {
+        ++out.bits;
+    }
+    if (out.bits > kMaxLatticeBits || magnitude >= (std::int64_t{1} << kMaxLatticeBits)) {
+        throw InputError("tile " + tile_name(raster.id) + ": eps " + number(budget.eps) +
+                         " m gives a quantization step of " + number(step) +
+                         " m, too fine for a tile this large (more than 2^23 steps across); "
+                         "use a larger eps for this zoom");
+    }
+    return out;
+}
+
+// Largest |snapped surface - sample| over the tile's valid samples, evaluated as a client
+// sees the decoded tile: each snapped vertex back to lon/lat/h and tile grid coordinates, the
+// surface interpolated linearly in (column, row) at each sample's exact position. A sample held
+// by several triangles (on an edge) takes the worst; one held by none (a border vertex snapped
+// a hair inward) is evaluated on the nearest triangle's plane.
+struct Verdict {
+    double max_error = 0;
+    int column = -1, row = -1;
+};
+
+Verdict
+snapped_error(const TileRaster& raster, const core::Mesh& mesh, const std::vector<Ecef>& world) {
+    const core::HeightGrid& grid = raster.grid;
+    std::vector<std::array<double, 3>> g(world.size());
+    for (std::size_t v = 0; v < world.size(); ++v) {
+        const Geodetic p = to_geodetic(world[v]);
+        lonlat_to_grid(raster, {p.lon, p.lat}, g[v][0], g[v][1]);
+        g[v][2] = p.h;
+    }
+    const std::size_t count = static_cast<std::size_t>(grid.width) * grid.height;
+    constexpr double kEdge = -1e-9; // barycentric slack: on an edge counts as inside
+    std::vector<double> outside(count, std::numeric_limits<double>::infinity());
+    std::vector<double> error(count, 0.0);
+    for (std::size_t t = 0; t < mesh.triangle_count(); ++t) {
+        const auto& a = g[mesh.triangles[3 * t]];
+        const auto& b = g[mesh.triangles[3 * t + 1]];
+        const auto& c = g[mesh.triangles[3 * t + 2]];
+        const double det = (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1]);
+        if (det == 0) {
+            continue; // collapsed (all of a pole row): its samples are covered by neighbours
+        }
+        const auto lo = [](double u, double v, double w) { return std::min({u, v, w}); };
+        const auto hi = [](double u, double v, double w) { return std::max({u, v, w}); };
+        const int x0 = std::max(0, int(std::floor(lo(a[0], b[0], c[0]))) - 1);
+        const int x1 = std::min(grid.width - 1, int(std::ceil(hi(a[0], b[0], c[0]))) + 1);
+        const int y0 = std::max(0, int(std::floor(lo(a[1], b[1], c[1]))) - 1);
+        const int y1 = std::min(grid.height - 1, int(std::ceil(hi(a[1], b[1], c[1]))) + 1);
+        for (int y = y0; y <= y1; ++y) {
+            for (int x = x0; x <= x1; ++x) {
+                const std::size_t k = static_cast<std::size_t>(y) * grid.width + x;
+                if (!grid.is_valid(x, y)) {
+                    continue;
+                }
+                const double la = ((b[0] - x) * (c[1] - y) - (c[0] - x) * (b[1] - y)) / det;
+                const double lb = ((c[0] - x) * (a[1] - y) - (a[0] - x) * (c[1] - y)) / det;
+                const double lc = 1 - la - lb;
+                const double e = std::abs(la * a[2] + lb * b[2] + lc * c[2] - grid.at(x, y));
+                const double out = std::max(0.0, -lo(la, lb, lc) + kEdge);
+                if (out == 0) {
+                    error[k] = outside[k] == 0 ? std::max(error[k], e) : e;
+                    outside[k] = 0;
+                } else if (out < outside[k]) {
+                    outside[k] = out;
+                    error[k] = e;
+                }
+            }
+        }
+    }
+    Verdict verdict;
+    for (std::size_t k = 0; k < count; ++k) {
+        if (error[k] > verdict.max_error) {
+            verdict.max_error = error[k];
+            verdict.column = static_cast<int>(k % grid.width);
+            verdict.row = static_cast<int>(k / grid.width);
+        }
+    }
+    return verdict;
+}
+
+std::string glb_json(const std::array<double, 3>& translation,
+                     const std::array<double, 3>& min,
+                     const std::array<double, 3>& max,
+                     std::size_t vertex_count,
+                     std::size_t index_count,
+                     std::uint32_t position_id,
+                     std::size_t draco_bytes) {
+    const auto vec = [](const std::array<double, 3>& v) {
+        return "[" + number(v[0]) + "," + number(v[1]) + "," + number(v[2]) + "]";
+    };
+    const int index_type = vertex_count > 65535 ? 5125 : 5123;
+    std::string j;
+    j += R"({"asset":{"version":"2.0","generator":"Terrabound"},)";
+    j += R"("extensionsUsed":["KHR_draco_mesh_compression"],)";
+    j += R"("extensionsRequired":["KHR_draco_mesh_compression"],)";
+    j += R"("scene":0,"scenes":[{"nodes":[0]}],)";
+    j += R"("nodes":[{"mesh":0,"translation":)" + vec(translation) + "}],";
+    j += R"("meshes":[{"primitives":[{"attributes":{"POSITION":0},"indices":1,"mode":4,)";
+    j += R"("extensions":{"KHR_draco_mesh_compression":{"bufferView":0,"attributes":{"POSITION":)" +
+         std::to_string(position_id) + "}}}}]}],";
+    j += R"("accessors":[{"componentType":5126,"count":)" + std::to_string(vertex_count) +
+         R"(,"type":"VEC3","min":)" + vec(min) + R"(,"max":)" + vec(max) + "},";
+    j += R"({"componentType":)" + std::to_string(index_type) + R"(,"count":)" +
+         std::to_string(index_count) + R"(,"type":"SCALAR"}],)";
+    j += R"("bufferViews":[{"buffer":0,"byteOffset":0,"byteLength":)" +
+         std::to_string(draco_bytes) + "}],";
+    j += R"("buffers":[{"byteLength":)" + std::to_string(draco_bytes) + "}]}";
+    return j;
+}
+
+std::string glb_container(std::string json, std::string_view bin) {
+    while (json.size() % 4 != 0) {
+        json.push_back(' ');
+    }
+    const std::size_t bin_padded = (bin.size() + 3) / 4 * 4;
+    const std::size_t total = 12 + 8 + json.size() + 8 + bin_padded;
+    TB_ASSERT(total <= std::numeric_limits<std::uint32_t>::max());
+    std::string out;
+    out.reserve(total);
+    put_u32(out, kGlbMagic);
+    put_u32(out, 2);
+    put_u32(out, static_cast<std::uint32_t>(total));
+    put_u32(out, static_cast<std::uint32_t>(json.size()));
+    put_u32(out, kChunkJson);
+    out += json;
+    put_u32(out, static_cast<std::uint32_t>(bin_padded));
+    put_u32(out, kChunkBin);
+    out += bin;
+    out.append(bin_padded - bin.size(), '\0');
+    return out;
+}
+
+} // namespace
+
+ErrorBudget error_budget(double eps) {
+    if (!std::isfinite(eps) || !(eps > 0)) {
+        throw InputError("eps " + std::to_string(eps) + ": expected a finite number of metres > 0");
+    }
+    // Per unit of s, snapping can move the surface by (1 + slope) * sqrt(3)/2 (see
+    // kQuantMaxSlope); Draco's float32 dequantization adds nothing (exact on the lattice).
+    const double per_step = (1 + kQuantMaxSlope) * std::sqrt(3.0) / 2;
+    double s = std::exp2(std::floor(std::log2(eps / 8 / per_step)));
+    while (per_step * s > eps / 8) {
+        s /= 2;
+    }
+    while (per_step * 2 * s <= eps / 8) {
+        s *= 2;
+    }
+    ErrorBudget b;
+    b.eps = eps;
+    b.quant_step = s;
+    b.quant_error = per_step * s;
+    b.mesh_eps = eps - b.quant_error;
+    TB_ASSERT(b.mesh_eps > 0);
+    return b;
+}
+
+std::string encode_tile(const TileRaster& raster,
+                        const core::Mesh& mesh,
+                        Format format,
+                        const ErrorBudget& budget) {
+    const std::size_t n = mesh.points.size();
+    TB_ASSERT(n >= 3 && mesh.z.size() == n && mesh.triangles.size() % 3 == 0);
+    TB_ASSERT(!mesh.triangles.empty());
+    TB_ASSERT(budget.quant_step > 0 && budget.eps > 0);
+    const double s = budget.quant_step;
+
+    // Exact positions (double): lon/lat from the tile grid, height from the mesh.
+    std::vector<Ecef> ecef(n);
+    float z_min = mesh.z[0], z_max = mesh.z[0];
+    for (std::size_t v = 0; v < n; ++v) {
+        const LonLat ll = grid_to_lonlat(raster, mesh.points[v].x, mesh.points[v].y);
+        ecef[v] = to_ecef({ll.lon, ll.lat, double(mesh.z[v])});
+        z_min = std::min(z_min, mesh.z[v]);
+        z_max = std::max(z_max, mesh.z[v]);
+    }
+    // The tile centre: the frame origin, on the level lattice.
+    const Geodetic centre{(raster.bounds.west + raster.bounds.east) / 2,
+                          (raster.bounds.south + raster.bounds.north) / 2,
+                          std::round((double(z_min) + z_max) / 2 / s) * s};
+    const EnuFrame enu = enu_frame(centre);
+    const Ecef c = to_ecef(centre);
+    const std::array<double, 3> kc{std::round(c.x / s), std::round(c.y / s), std::round(c.z / s)};
+    std::array<double, 3> translation{};
+    if (format == Format::Glb) {
+        // glTF is y-up: ECEF (x, y, z) is written as (x, z, -y); the rotation keeps winding.
+        translation = {kc[0] * s, kc[2] * s, -kc[1] * s};
+    }
+    std::vector<std::array<double, 3>> enu_exact(n);
+    for (std::size_t v = 0; v < n; ++v) {
+        enu_exact[v] = ecef_to_enu(enu, ecef[v]);
+    }
+
+    // Border vertices always snap to the level lattice s (their neighbour tile snaps them the
+    // same way). Interior vertices start on s too; in the rare tile where that breaks eps
+    // (a triangle steeper than kQuantMaxSlope next to a sample already near mesh_eps) they are
+    // snapped to a finer lattice s/2^k, of which s is a sublattice, so borders still match.
+    constexpr int kMaxRefine = 6;
+    double step = s;
+    std::vector<std::array<std::int64_t, 3>> q(n);
+    std::vector<Ecef> world(n);
+    for (int refine = 0;; ++refine) {
+        step = std::ldexp(s, -refine);
+        for (std::size_t v = 0; v < n; ++v) {
+            const core::GridPoint p = mesh.points[v];
+            const bool border = p.x == 0 || p.y == 0 || p.x == raster.grid.width - 1 ||
+                                p.y == raster.grid.height - 1;
+            const double unit = border ? s : step;
+            const double ratio = unit / step; // a power of two
+            if (format == Format::Glb) {
+                const std::array<double, 3> k{std::round(ecef[v].x / unit) * ratio,
+                                              std::round(ecef[v].y / unit) * ratio,
+                                              std::round(ecef[v].z / unit) * ratio};
+                const double fine = s / step;
+                q[v] = {std::llround(k[0] - kc[0] * fine),
+                        std::llround(k[2] - kc[2] * fine),
+                        -std::llround(k[1] - kc[1] * fine)};
+                world[v] = {k[0] * step, k[1] * step, k[2] * step};
+            } else {
+                std::array<double, 3> local{};
+                for (int a = 0; a < 3; ++a) {
+                    const double k = std::round(enu_exact[v][a] / unit) * ratio;
+                    q[v][a] = std::llround(k);
+                    local[a] = k * step;
+                }
+                world[v] = enu_to_ecef(enu, local);
+            }
+        }
+        finish_lattice(q, step, raster, budget); // throws when the lattice is too fine for the tile
+        const Verdict verdict = snapped_error(raster, mesh, world);
+        if (verdict.max_error <= budget.eps) {
+            if (refine > 0) {
+                log::debug("tile " + tile_name(raster.id) + ": interior lattice refined to " +
+                           number(step) + " m to keep eps " + number(budget.eps) + " m");
+            }
+            break;
+        }
+        if (refine == kMaxRefine) {
+            throw Error("tile " + tile_name(raster.id) + ": quantizing positions to the " +
+                        number(s) + " m lattice moves the surface by up to " +
+                        number(verdict.max_error) + " m at sample (" +
+                        std::to_string(verdict.column) + ", " + std::to_string(verdict.row) +
+                        "), more than eps " + number(budget.eps) +
+                        " m (a near-vertical cliff on the tile border); this is a bug, "
+                        "please report it with the tile");
+        }
+    }
+    const Snapped snap = finish_lattice(q, step, raster, budget);
+
+    // The Draco mesh: lattice points as float32 (exact), triangles flipped to be
+    // counter-clockwise seen from above (core's are CCW in (column, row), row pointing south).
+    draco::Mesh dm;
+    dm.set_num_points(static_cast<draco::PointIndex::ValueType>(n));
+    draco::GeometryAttribute ga;
+    ga.Init(draco::GeometryAttribute::POSITION,
+            nullptr,
+            3,
+            draco::DT_FLOAT32,
+            false,
+            sizeof(float) * 3,
+            0);
+    const int att_id = dm.AddAttribute(ga, true, static_cast<std::uint32_t>(n));
+    draco::PointAttribute* att = dm.attribute(att_id);
+    for (std::size_t v = 0; v < n; ++v) {
+        const float p[3] = {static_cast<float>(double(snap.q[v][0]) * step),
+                            static_cast<float>(double(snap.q[v][1]) * step),
+                            static_cast<float>(double(snap.q[v][2]) * step)};
+        att->SetAttributeValue(draco::AttributeValueIndex(static_cast<std::uint32_t>(v)), p);
+    }
+    for (std::size_t t = 0; t < mesh.triangle_count(); ++t) {
+        dm.AddFace({draco::PointIndex(mesh.triangles[3 * t]),
+                    draco::PointIndex(mesh.triangles[3 * t + 2]),
+                    draco::PointIndex(mesh.triangles[3 * t + 1])});
+    }
+    if (format == Format::Drc) {
+        auto md = std::make_unique<draco::GeometryMetadata>();
+        md->AddEntryString("schema", kDrcSchema);
+        md->AddEntryString("crs", "EPSG:4979");
+        md->AddEntryString("frame", "ENU");
+        md->AddEntryString("up_axis", "Z");
+        md->AddEntryString("scheme", to_string(raster.scheme));
+        md->AddEntryDouble("origin_lon_deg", centre.lon);
+        md->AddEntryDouble("origin_lat_deg", centre.lat);
+        md->AddEntryDouble("origin_h_m", centre.h);
+        md->AddEntryDouble("west_deg", raster.bounds.west);
+        md->AddEntryDouble("south_deg", raster.bounds.south);
+        md->AddEntryDouble("east_deg", raster.bounds.east);
+        md->AddEntryDouble("north_deg", raster.bounds.north);
+        md->AddEntryDouble("min_h_m", z_min);
+        md->AddEntryDouble("max_h_m", z_max);
+        md->AddEntryDouble("eps_m", budget.eps);
+        md->AddEntryDouble("quant_step_m", step);
+        md->AddEntryDouble("quant_error_m", budget.quant_error);
+        md->AddEntryInt("level", raster.id.z);
+        md->AddEntryInt("x", static_cast<std::int32_t>(raster.id.x));
+        md->AddEntryInt("y", static_cast<std::int32_t>(raster.id.y));
+        dm.AddMetadata(std::move(md));
+    }
+
+    draco::Encoder encoder;
+    encoder.SetSpeedOptions(kDracoSpeed, kDracoSpeed);
+    encoder.SetEncodingMethod(draco::MESH_EDGEBREAKER_ENCODING);
+    const float origin[3] = {static_cast<float>(double(snap.origin[0]) * step),
+                             static_cast<float>(double(snap.origin[1]) * step),
+                             static_cast<float>(double(snap.origin[2]) * step)};
+    const float range = static_cast<float>(double((std::int64_t{1} << snap.bits) - 1) * step);
+    encoder.SetAttributeExplicitQuantization(
+        draco::GeometryAttribute::POSITION, snap.bits, 3, origin, range);
+    draco::EncoderBuffer buffer;
+    check(encoder.EncodeMeshToBuffer(dm, &buffer), "encoding", raster.id);
+    std::string draco_bytes(buffer.data(), buffer.size());
+
+    // Self-check on the decoded data (what clients see): counts kept, every coordinate on the
+    // lattice point it was snapped to; glTF min/max are taken from it.
+    const DecodedTile decoded = decode_drc(draco_bytes);
+    if (decoded.positions.size() != n || decoded.indices.size() != mesh.triangles.size()) {
+        throw Error("tile " + tile_name(raster.id) + ": Draco changed the mesh (" +
+                    std::to_string(n) + " vertices -> " + std::to_string(decoded.positions.size()) +
+                    "); this is a bug, please report it with the tile");
+    }
+    std::array<double, 3> min{}, max{};
+    for (int k = 0; k < 3; ++k) {
+        min[k] = max[k] = decoded.positions[0][k];
+    }
+    for (const auto& p : decoded.positions) {
+        for (int k = 0; k < 3; ++k) {
+            const double steps = p[k] / step;
+            if (steps != std::round(steps) || p[k] < double(snap.lo[k]) * step ||
+                p[k] > double(snap.hi[k]) * step) {
+                throw Error("tile " + tile_name(raster.id) + ": Draco decoded coordinate " +
+                            number(p[k]) + " off the " + number(step) +
+                            " m lattice; this is a bug, please report it with the tile");
+            }
+            min[k] = std::min(min[k], p[k]);
+            max[k] = std::max(max[k], p[k]);
+        }
+    }
+    if (format == Format::Drc) {
+        return draco_bytes;
+    }
+    const std::string json = glb_json(
+        translation, min, max, n, mesh.triangles.size(), att->unique_id(), draco_bytes.size());
+    return glb_container(json, draco_bytes);
+}
+
+} // namespace tb::tiler
