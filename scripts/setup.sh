@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Installs what Terrabound needs to build, test and run on Debian 12, and fetches the demo DEM.
+# Installs what Terrabound needs to build, test and run on Debian 12, fetches the demo DEM and
+# installs the viewer's npm packages.
 # Idempotent: installs only missing packages and re-downloads nothing that is already there.
 #   scripts/setup.sh            build + run dependencies and the demo DEM
 #   scripts/setup.sh --runtime  only what the built binary needs at run time (Docker runtime stage)
@@ -10,7 +11,7 @@ BUILD_PACKAGES=(
     build-essential cmake pkg-config ccache
     libgdal-dev gdal-bin libgeographiclib-dev libdraco-dev libcpp-httplib-dev
     nlohmann-json3-dev doctest-dev libsqlite3-dev zlib1g-dev proj-data
-    ca-certificates
+    ca-certificates chromium
 )
 RUNTIME_PACKAGES=(
     libgdal32 libgeographiclib23 libdraco7 libcpp-httplib0.11 libsqlite3-0 zlib1g proj-data
@@ -73,6 +74,18 @@ install_node() {
     install_packages nodejs npm
 }
 
+# The viewer's JavaScript (CesiumJS, three.js) and the browser tests' tools, pinned by
+# web/package-lock.json; installed again only when the lock file changes.
+install_web() {
+    if [ -f web/node_modules/.package-lock.json ] &&
+        [ web/node_modules/.package-lock.json -nt web/package-lock.json ]; then
+        log "web/node_modules up to date"
+        return
+    fi
+    log "installing the viewer's npm packages (npm ci --prefix web)"
+    npm ci --prefix web --no-audit --no-fund --loglevel=error >/dev/null
+}
+
 if [ "${1:-}" = "--runtime" ]; then
     install_packages "${RUNTIME_PACKAGES[@]}"
     exit 0
@@ -80,3 +93,4 @@ fi
 install_packages "${BUILD_PACKAGES[@]}"
 install_node
 fetch_demo_dem
+install_web
