@@ -1,67 +1,221 @@
-// terrabound serve: the HTTP server. Until the server issue lands this answers /health only.
+// terrabound serve: terrain tiles over HTTP, from a config file or from DEMs given directly.
+#include "config/config.hpp"
 #include "core/error.hpp"
 #include "server/commands.hpp"
-#include "tiler/gdal_source.hpp"
+#include "server/http_server.hpp"
+#include "server/metrics.hpp"
+#include "server/tile_service.hpp"
 #include "tiler/log.hpp"
+#include "tiler/store.hpp"
 
-#include <httplib.h>
+#include <pthread.h>
+#include <signal.h>
+#include <time.h>
 
-#include <csignal>
+#include <cstdlib>
+
+#include <atomic>
+#include <map>
+#include <set>
+#include <thread>
 
 namespace tb::cli {
 namespace {
 
-httplib::Server* g_server = nullptr;
-
-void on_signal(int) {
-    if (g_server) {
-        g_server->stop();
-    }
+bool ends_with(const std::string& s, const std::string& suffix) {
+    return s.size() >= suffix.size() &&
+           s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
+// One layer per DEM with the defaults; names from the file names, made unique.
+config::Config config_from_dems(const std::vector<std::string>& dems) {
+    config::Config cfg;
+    std::set<std::string> names;
+    for (const auto& dem : dems) {
+        config::LayerConfig layer;
+        std::string name = config::layer_name_from_path(dem);
+        for (int n = 2; names.count(name); ++n) {
+            name = config::layer_name_from_path(dem) + "_" + std::to_string(n);
+        }
+        names.insert(name);
+        layer.options.name = name;
+        layer.options.sources = {dem};
+        cfg.layers.push_back(std::move(layer));
+    }
+    return cfg;
+}
+
+// Owns SIGINT and SIGTERM for the whole command: they are blocked in this thread and in every
+// thread started afterwards (HTTP, generation), and one waiter thread takes them with
+// sigtimedwait. While the server starts (opening DEMs can take a while), a signal exits at
+// once; once serving() is called, it stops the server gracefully instead.
+class StopSignals {
+public:
+    StopSignals() {
+        sigemptyset(&set_);
+        sigaddset(&set_, SIGINT);
+        sigaddset(&set_, SIGTERM);
+        pthread_sigmask(SIG_BLOCK, &set_, nullptr);
+        waiter_ = std::thread([this] { wait(); });
+    }
+    ~StopSignals() { finish(); }
+    StopSignals(const StopSignals&) = delete;
+    StopSignals& operator=(const StopSignals&) = delete;
+
+    void serving(server::HttpServer& http) { http_ = &http; }
+    // Ends the waiter; call before the server it stops goes away.
+    void finish() {
+        done_ = true;
+        if (waiter_.joinable()) {
+            waiter_.join();
+        }
+    }
+
+private:
+    void wait() {
+        const timespec tick{0, 200 * 1000 * 1000};
+        while (!done_) {
+            const int signal_number = sigtimedwait(&set_, nullptr, &tick);
+            if (signal_number != SIGINT && signal_number != SIGTERM) {
+                continue;
+            }
+            const char* name = signal_number == SIGINT ? "SIGINT" : "SIGTERM";
+            server::HttpServer* http = http_;
+            if (!http) {
+                log::info(std::string("received ") + name + " while starting; exiting");
+                std::_Exit(128 + signal_number);
+            }
+            log::info(std::string("received ") + name + "; finishing requests in flight");
+            http->stop();
+            return;
+        }
+    }
+
+    sigset_t set_;
+    std::atomic<bool> done_{false};
+    std::atomic<server::HttpServer*> http_{nullptr};
+    std::thread waiter_;
+};
+
 int run(const Args& args) {
-    const std::string host = args.get("host").value_or("127.0.0.1");
-    const long long port = args.get_int("port", 8080);
-    if (port < 1 || port > 65535) {
-        throw InputError("--port: expected 1..65535, got " + std::to_string(port));
+    StopSignals signals;
+
+    config::Config cfg;
+    if (args.positional.size() == 1 && ends_with(args.positional[0], ".json")) {
+        cfg = config::load_config(args.positional[0]);
+    } else if (args.positional.empty()) {
+        throw InputError("serve: name a config file (.json) or one or more DEM files; see "
+                         "'terrabound serve --help'");
+    } else {
+        for (const auto& p : args.positional) {
+            if (ends_with(p, ".json")) {
+                throw InputError("serve: " + p +
+                                 ": give a config file alone, not together with DEMs");
+            }
+        }
+        cfg = config_from_dems(args.positional);
     }
-    for (const auto& dem : args.positional) {
-        tiler::inspect_dem(dem);  // fail early on a bad DEM
+    if (auto host = args.get("host")) {
+        cfg.server.host = *host;
     }
-    httplib::Server server;
-    server.set_exception_handler([](const httplib::Request&, httplib::Response& res,
-                                    std::exception_ptr) {
-        res.status = 500;
-        res.set_content("{\"error\":\"internal error\"}", "application/json");
-    });
-    server.Get("/health", [](const httplib::Request&, httplib::Response& res) {
-        res.set_content("{\"status\":\"ok\"}\n", "application/json");
-    });
-    g_server = &server;
-    std::signal(SIGINT, on_signal);
-    std::signal(SIGTERM, on_signal);
-    if (!server.bind_to_port(host, static_cast<int>(port))) {
-        throw IoError("cannot listen on " + host + ":" + std::to_string(port) +
-                      "; is another server using the port? pick one with --port");
+    if (args.has("port")) {
+        const long long port = args.get_int("port", cfg.server.port);
+        if (port < 0 || port > 65535) {
+            throw InputError("--port: expected 0..65535 (0: any free port), got " +
+                             std::to_string(port));
+        }
+        cfg.server.port = static_cast<int>(port);
     }
-    log::info("serving http://" + host + ":" + std::to_string(port) + "/");
-    server.listen_after_bind();
+    if (args.has("threads")) {
+        const long long threads = args.get_int("threads", cfg.server.threads);
+        if (threads < 0 || threads > 256) {
+            throw InputError("--threads: expected 0..256 (0: one per core), got " +
+                             std::to_string(threads));
+        }
+        cfg.server.threads = static_cast<int>(threads);
+    }
+    if (auto store = args.get("store")) {
+        for (auto& layer : cfg.layers) {
+            layer.store = *store;
+        }
+    }
+    log::Level level = log::Level::Info;
+    if (log::parse_level(cfg.server.log_level, level)) {
+        log::set_level(level);
+    }
+
+    // Layers and stores; any failure here stops before listening.
+    server::Metrics metrics;
+    std::map<std::string, std::shared_ptr<tiler::TileStore>> stores;
+    std::vector<server::ServedLayer> served;
+    for (const auto& layer : cfg.layers) {
+        server::ServedLayer s;
+        s.layer = tiler::Layer::open(layer.options);
+        s.formats = layer.formats;
+        if (layer.store) {
+            auto& store = stores[*layer.store];
+            if (!store) {
+                store = tiler::TileStore::open(*layer.store);
+                log::info("store: " + store->describe());
+            }
+            s.store = store;
+        }
+        log::info("layer " + layer.options.name + ": zooms " + std::to_string(s.layer->min_zoom()) +
+                  ".." + std::to_string(s.layer->max_zoom()));
+        served.push_back(std::move(s));
+    }
+    const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
+    const int threads = cfg.server.threads > 0 ? cfg.server.threads : static_cast<int>(cores);
+
+    server::TileServiceOptions tile_options;
+    tile_options.cache_bytes = cfg.server.cache_mb << 20;
+    tile_options.threads = threads;
+    tile_options.queue_limit = cfg.server.queue_limit;
+    server::TileService tiles(std::move(served), tile_options, metrics);
+
+    server::HttpOptions http_options;
+    http_options.host = cfg.server.host;
+    http_options.port = cfg.server.port;
+    http_options.cors_origins = cfg.server.cors_origins;
+    http_options.http_threads = std::max(16, 4 * threads);
+    server::HttpServer http(tiles, metrics, http_options);
+    const int port = http.bind();
+
+    signals.serving(http);
+
+    const std::string shown_host = cfg.server.host == "0.0.0.0" ? "localhost" : cfg.server.host;
+    log::info("serving http://" + shown_host + ":" + std::to_string(port) + "/ (" +
+              std::to_string(tiles.layers().size()) + " layer(s), " + std::to_string(threads) +
+              " generation thread(s)); open it in a browser, stop with Ctrl-C");
+    http.run();
+
+    signals.finish();
     log::info("stopped");
     return 0;
 }
 
-}  // namespace
+} // namespace
 
 const Command& serve_command() {
     static const Command command{
         {"serve",
-         "[CONFIG.json | DEM...] [--host H] [--port P]",
+         "[CONFIG.json | DEM...] [--host H] [--port P] [--threads N] [--store PATH]",
          "Serve terrain tiles over HTTP.",
-         {{"host", "HOST", "address to listen on (default 127.0.0.1)"},
-          {"port", "PORT", "port to listen on (default 8080)"}},
-         ""},
+         {{"host", "HOST", "address to listen on (default 127.0.0.1, or the config's)"},
+          {"port", "PORT", "port to listen on (default 8080; 0 picks a free port)"},
+          {"threads", "N", "tile generation threads (default: one per core)"},
+          {"store",
+           "PATH",
+           "keep generated tiles in this store for every layer: a directory, or a file "
+           "ending in .sqlite or .db"}},
+         "With DEM files, each becomes a layer named after its file, with default settings.\n"
+         "With a config file (JSON), every setting is explicit; see the README, "
+         "\"Configuration\".\n"
+         "Tiles: /{layer}/{z}/{x}/{y}.glb or .drc, ?eps=K for the layer's eps_levels[K];\n"
+         "tilesets: /{layer}/tileset.json. SIGINT/SIGTERM finish requests in flight, then "
+         "exit.\n"},
         run};
     return command;
 }
 
-}  // namespace tb::cli
+} // namespace tb::cli

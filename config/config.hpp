@@ -1,0 +1,55 @@
+#pragma once
+// The server configuration: a JSON file (schema in the README, "Configuration") read into plain
+// structs. Only config/config.cpp sees nlohmann-json.
+//
+// Every problem in a file is collected and reported together, one line each, with the JSON
+// pointer of the offending value:
+//   config.json: /layers/0/finest_eps: expected a number > 0, got -1
+#include "tiler/format.hpp"
+#include "tiler/layer.hpp"
+
+#include <cstddef>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace tb::config {
+
+struct ServerConfig {
+    std::string host = "127.0.0.1";
+    int port = 8080;
+    int threads = 0;                               // tile generation threads; 0 = one per core
+    std::size_t cache_mb = 256;                    // in-memory tile cache, MiB (0 disables it)
+    std::vector<std::string> cors_origins = {"*"}; // Access-Control-Allow-Origin values
+    std::string log_level = "info";                // debug | info | warn | error | off
+    int queue_limit = 64; // generations allowed to wait for a thread; past it: 503
+};
+
+struct LayerConfig {
+    tiler::LayerOptions options; // sources already resolved against the config's dir
+    std::vector<tiler::Format> formats = {tiler::Format::Glb, tiler::Format::Drc};
+    std::optional<std::string> store; // directory or *.sqlite / *.db; none: memory only
+};
+
+struct Config {
+    ServerConfig server;
+    std::vector<LayerConfig> layers;
+};
+
+// Parses and validates `text`, the contents of the file `path` (used in messages and to
+// resolve relative source and store paths against its directory). Checks unknown keys, types,
+// ranges, duplicate layer names and that every local source file exists. Throws InputError
+// whose message lists every problem, one per line.
+Config parse_config(const std::string& text, const std::string& path);
+
+// Reads `path` and parses it. Throws InputError when it cannot be read or is invalid.
+Config load_config(const std::string& path);
+
+// A URL-safe layer name ([A-Za-z0-9_-]+) derived from a DEM path: "data/N57E011.hgt" ->
+// "N57E011", "my dem (v2).tif" -> "my_dem_v2". Never empty.
+std::string layer_name_from_path(const std::string& path);
+
+// True when `name` is a valid layer name: 1..64 characters of [A-Za-z0-9_-].
+bool is_valid_layer_name(const std::string& name);
+
+} // namespace tb::config

@@ -1,0 +1,384 @@
+// TileService: LRU -> store -> single-flight generation on a bounded pool.
+#include "server/tile_service.hpp"
+
+#include "core/error.hpp"
+#include "tiler/log.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <condition_variable>
+#include <cstdio>
+#include <deque>
+#include <functional>
+#include <future>
+#include <list>
+#include <map>
+#include <mutex>
+#include <thread>
+#include <unordered_map>
+
+namespace tb::server {
+namespace {
+
+// Bookkeeping bytes charged per cache entry on top of key and payload.
+constexpr std::size_t kEntryOverhead = 128;
+
+// A least-recently-used map bounded by the bytes of its keys and values.
+class LruCache {
+public:
+    LruCache(std::size_t capacity, Metrics& metrics) : capacity_(capacity), metrics_(metrics) {}
+
+    std::shared_ptr<const Blob> get(const std::string& key) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        const auto it = index_.find(key);
+        if (it == index_.end()) {
+            return nullptr;
+        }
+        order_.splice(order_.begin(), order_, it->second);
+        return it->second->second;
+    }
+
+    void put(const std::string& key, std::shared_ptr<const Blob> blob) {
+        const std::size_t cost = key.size() + blob->bytes.size() + kEntryOverhead;
+        if (cost > capacity_) {
+            return; // larger than the whole cache: serve it, don't keep it
+        }
+        std::lock_guard<std::mutex> lock(mutex_);
+        const auto it = index_.find(key);
+        if (it != index_.end()) {
+            bytes_ -= cost_of(*it->second);
+            order_.erase(it->second);
+            index_.erase(it);
+        }
+        order_.emplace_front(key, std::move(blob));
+        index_.emplace(key, order_.begin());
+        bytes_ += cost;
+        while (bytes_ > capacity_ && !order_.empty()) {
+            bytes_ -= cost_of(order_.back());
+            index_.erase(order_.back().first);
+            order_.pop_back();
+        }
+        metrics_.cache_bytes = bytes_;
+        metrics_.cache_entries = index_.size();
+    }
+
+private:
+    using Entry = std::pair<std::string, std::shared_ptr<const Blob>>;
+    static std::size_t cost_of(const Entry& e) {
+        return e.first.size() + e.second->bytes.size() + kEntryOverhead;
+    }
+
+    std::size_t capacity_;
+    Metrics& metrics_;
+    std::mutex mutex_;
+    std::size_t bytes_ = 0;
+    std::list<Entry> order_; // most recent first
+    std::unordered_map<std::string, std::list<Entry>::iterator> index_;
+};
+
+// A fixed set of threads draining a FIFO of jobs. Admission (the queue limit) is decided by
+// the caller under its own lock, so this stays a plain pool.
+class Pool {
+public:
+    explicit Pool(int threads) {
+        for (int i = 0; i < threads; ++i) {
+            threads_.emplace_back([this] { work(); });
+        }
+    }
+    ~Pool() {
+        {
+            std::lock_guard<std::mutex> lock(mutex_);
+            stopping_ = true;
+        }
+        cv_.notify_all();
+        for (auto& t : threads_) {
+            t.join();
+        }
+    }
+    void submit(std::function<void()> job) {
+        {
+            std::lock_guard<std::mutex> lock(mutex_);
+            jobs_.push_back(std::move(job));
+        }
+        cv_.notify_one();
+    }
+
+private:
+    void work() {
+        for (;;) {
+            std::function<void()> job;
+            {
+                std::unique_lock<std::mutex> lock(mutex_);
+                cv_.wait(lock, [this] { return stopping_ || !jobs_.empty(); });
+                if (jobs_.empty()) {
+                    return; // stopping, and every queued job has run
+                }
+                job = std::move(jobs_.front());
+                jobs_.pop_front();
+            }
+            job();
+        }
+    }
+
+    std::mutex mutex_;
+    std::condition_variable cv_;
+    std::deque<std::function<void()>> jobs_;
+    bool stopping_ = false;
+    std::vector<std::thread> threads_;
+};
+
+std::string
+tile_key(const std::string& layer, const tiler::TileId& id, tiler::Format format, int eps_level) {
+    return "t/" + layer + "/" + tiler::extension(format) + "/" + std::to_string(eps_level) + "/" +
+           std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
+}
+
+std::shared_ptr<const Blob> make_blob(std::string bytes) {
+    auto blob = std::make_shared<Blob>();
+    blob->etag = make_etag(bytes);
+    blob->bytes = std::move(bytes);
+    return blob;
+}
+
+std::shared_ptr<const Blob> make_failure(int status, std::string reason) {
+    auto blob = std::make_shared<Blob>();
+    blob->failure = status;
+    blob->bytes = std::move(reason);
+    return blob;
+}
+
+// Rethrows a remembered failure as the error it came from.
+void throw_if_failure(const Blob& blob) {
+    if (blob.failure == 404) {
+        throw NotFound(blob.bytes);
+    }
+    if (blob.failure != 0) {
+        throw InputError(blob.bytes);
+    }
+}
+
+} // namespace
+
+std::string make_etag(std::string_view bytes) {
+    std::uint64_t h = 14695981039346656037ull;
+    for (unsigned char c : bytes) {
+        h = (h ^ c) * 1099511628211ull;
+    }
+    char text[64];
+    std::snprintf(
+        text, sizeof text, "\"%016llx-%zx\"", static_cast<unsigned long long>(h), bytes.size());
+    return text;
+}
+
+struct TileService::Impl {
+    Impl(const TileServiceOptions& o, Metrics& m)
+        : options(o), metrics(m), cache(o.cache_bytes, m), pool(o.threads) {}
+
+    TileServiceOptions options;
+    Metrics& metrics;
+    LruCache cache;
+
+    std::mutex flight_mutex; // guards `flights` and `pending`
+    std::map<std::string, std::shared_future<std::shared_ptr<const Blob>>> flights;
+    int pending = 0; // generations queued or running
+
+    Pool pool; // last: destroyed (drained and joined) first
+};
+
+TileService::TileService(std::vector<ServedLayer> layers,
+                         const TileServiceOptions& options,
+                         Metrics& metrics)
+    : layers_(std::move(layers)) {
+    TB_ASSERT(options.threads >= 1 && options.queue_limit >= 0);
+    impl_ = std::make_unique<Impl>(options, metrics);
+    TB_ASSERT(std::all_of(
+        layers_.begin(), layers_.end(), [](const ServedLayer& l) { return l.layer != nullptr; }));
+}
+
+TileService::~TileService() = default;
+
+const ServedLayer* TileService::find(const std::string& name) const {
+    for (const auto& l : layers_) {
+        if (l.layer->options().name == name) {
+            return &l;
+        }
+    }
+    return nullptr;
+}
+
+std::shared_ptr<const Blob> TileService::tile(const std::string& layer_name,
+                                              const tiler::TileId& id,
+                                              tiler::Format format,
+                                              tiler::EpsChoice eps) {
+    const ServedLayer* served = find(layer_name);
+    if (!served) {
+        throw NotFound("unknown layer '" + layer_name + "'");
+    }
+    const tiler::Layer& layer = *served->layer;
+    bool format_served = false;
+    for (auto f : served->formats) {
+        format_served = format_served || f == format;
+    }
+    if (!format_served) {
+        throw NotFound("layer '" + layer_name + "' does not serve ." + tiler::extension(format) +
+                       " tiles");
+    }
+    const int n_levels = static_cast<int>(layer.options().eps_levels.size());
+    if (eps.level < -1 || eps.level >= n_levels) {
+        throw InputError("eps level " + std::to_string(eps.level) + " is not configured; layer '" +
+                         layer_name + "' has " + std::to_string(n_levels) + " eps level(s)");
+    }
+    if (!tiler::is_valid(layer.options().scheme, id)) {
+        throw InputError("tile " + std::to_string(id.z) + "/" + std::to_string(id.x) + "/" +
+                         std::to_string(id.y) + " is outside the " +
+                         tiler::to_string(layer.options().scheme) + " tiling scheme");
+    }
+    const std::string where =
+        std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
+    if (id.z < layer.min_zoom() || id.z > layer.max_zoom() || !layer.may_have_tile(id)) {
+        throw NotFound("layer '" + layer_name + "' has no tile " + where + " (zooms " +
+                       std::to_string(layer.min_zoom()) + ".." + std::to_string(layer.max_zoom()) +
+                       ")");
+    }
+
+    Impl& s = *impl_;
+    const std::string key = tile_key(layer_name, id, format, eps.level);
+    std::shared_ptr<const Blob> blob = s.cache.get(key);
+    if (blob) {
+        ++s.metrics.cache_hits;
+    } else {
+        ++s.metrics.cache_misses;
+        std::shared_future<std::shared_ptr<const Blob>> flight;
+        std::shared_ptr<std::promise<std::shared_ptr<const Blob>>> promise;
+        {
+            std::lock_guard<std::mutex> lock(s.flight_mutex);
+            const auto it = s.flights.find(key);
+            if (it != s.flights.end()) {
+                flight = it->second;
+                ++s.metrics.single_flight_waits;
+            } else {
+                promise = std::make_shared<std::promise<std::shared_ptr<const Blob>>>();
+                flight = promise->get_future().share();
+                s.flights.emplace(key, flight);
+            }
+        }
+        if (promise) {
+            // This request leads: look in the store, else queue a generation.
+            const tiler::TileKey store_key{layer_name, id, format, eps.level};
+            std::optional<std::string> stored;
+            if (served->store) {
+                try {
+                    stored = served->store->get(store_key); // stores are thread-safe
+                } catch (...) {
+                    std::lock_guard<std::mutex> lock(s.flight_mutex);
+                    promise->set_exception(std::current_exception());
+                    s.flights.erase(key);
+                    throw;
+                }
+            }
+            if (stored) {
+                ++s.metrics.store_hits;
+                auto found = make_blob(std::move(*stored));
+                s.cache.put(key, found);
+                std::lock_guard<std::mutex> lock(s.flight_mutex);
+                promise->set_value(found);
+                s.flights.erase(key);
+            } else {
+                bool admitted = false;
+                {
+                    std::lock_guard<std::mutex> lock(s.flight_mutex);
+                    if (s.pending < s.options.threads + s.options.queue_limit) {
+                        ++s.pending;
+                        admitted = true;
+                    } else {
+                        // Followers of this flight get the same answer: busy.
+                        promise->set_value(nullptr);
+                        s.flights.erase(key);
+                    }
+                }
+                if (!admitted) {
+                    ++s.metrics.queue_rejections;
+                    return nullptr;
+                }
+                ++s.metrics.queued_generations;
+                s.pool.submit([&s, served, &layer, store_key, key, promise, format, eps, id] {
+                    --s.metrics.queued_generations;
+                    ++s.metrics.in_flight_generations;
+                    const auto start = std::chrono::steady_clock::now();
+                    std::shared_ptr<const Blob> made;
+                    std::exception_ptr failure;
+                    try {
+                        made = make_blob(layer.make_tile(id, format, eps));
+                        ++s.metrics.tiles_generated;
+                    } catch (const NotFound& e) {
+                        made = make_failure(404, e.what());
+                        ++s.metrics.tiles_empty;
+                    } catch (const InputError& e) {
+                        // Deterministic for this tile and eps: remember it, don't remesh.
+                        made = make_failure(400, e.what());
+                    } catch (...) {
+                        failure = std::current_exception();
+                    }
+                    s.metrics.generation_micros += static_cast<std::uint64_t>(
+                        std::chrono::duration_cast<std::chrono::microseconds>(
+                            std::chrono::steady_clock::now() - start)
+                            .count());
+                    --s.metrics.in_flight_generations;
+                    if (made && made->failure == 0 && served->store) {
+                        try {
+                            served->store->put(store_key, made->bytes);
+                        } catch (const std::exception& e) {
+                            ++s.metrics.store_write_failures;
+                            log::warn(std::string("tile not stored: ") + e.what());
+                        }
+                    }
+                    if (made) {
+                        s.cache.put(key, made);
+                    }
+                    std::lock_guard<std::mutex> lock(s.flight_mutex);
+                    --s.pending;
+                    if (failure) {
+                        promise->set_exception(failure);
+                    } else {
+                        promise->set_value(made);
+                    }
+                    s.flights.erase(key);
+                });
+            }
+        }
+        blob = flight.get(); // rethrows the generation's InputError / IoError
+        if (!blob) {
+            ++s.metrics.queue_rejections;
+            return nullptr;
+        }
+    }
+    throw_if_failure(*blob);
+    return blob;
+}
+
+std::shared_ptr<const Blob> TileService::document(const std::string& layer_name,
+                                                  const std::string& path) {
+    const ServedLayer* served = find(layer_name);
+    if (!served) {
+        throw NotFound("unknown layer '" + layer_name + "'");
+    }
+    Impl& s = *impl_;
+    const std::string key = "d/" + layer_name + "/" + path;
+    std::shared_ptr<const Blob> blob = s.cache.get(key);
+    if (blob) {
+        ++s.metrics.cache_hits;
+    } else {
+        ++s.metrics.cache_misses;
+        std::string text;
+        if (served->layer->document(path, text)) {
+            blob = make_blob(std::move(text));
+        } else {
+            blob = make_failure(404, "layer '" + layer_name + "' has no document '" + path + "'");
+        }
+        s.cache.put(key, blob);
+    }
+    throw_if_failure(*blob);
+    return blob;
+}
+
+} // namespace tb::server

@@ -1,0 +1,76 @@
+#pragma once
+// TileService: what the HTTP handlers ask for tiles and tileset documents. No sockets here.
+//
+// A tile request goes: memory LRU (bounded in bytes) -> the layer's store, if any -> generation
+// on a bounded pool. Generation is single-flight: concurrent requests for the same missing tile
+// wait for one make_tile call. A generated tile is written to the store (atomically, by
+// TileStore::put) and inserted in the LRU. Tiles with no data are remembered in the LRU too, so
+// repeated requests outside the data stay cheap.
+#include "server/metrics.hpp"
+#include "tiler/format.hpp"
+#include "tiler/layer.hpp"
+#include "tiler/store.hpp"
+
+#include <cstddef>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace tb::server {
+
+struct ServedLayer {
+    std::shared_ptr<const tiler::Layer> layer;
+    std::vector<tiler::Format> formats;      // the formats served; others are 404
+    std::shared_ptr<tiler::TileStore> store; // may be null; may be shared between layers
+};
+
+struct TileServiceOptions {
+    std::size_t cache_bytes = std::size_t{256} << 20;
+    int threads = 1;      // generation threads, >= 1
+    int queue_limit = 64; // generations allowed to wait for a thread, >= 0
+};
+
+// An immutable response payload with its strong validator, or a remembered failure.
+struct Blob {
+    std::string bytes;
+    std::string etag; // quoted, e.g. "\"3f2a...-1c40\""
+    // 0 for a payload. A remembered answer otherwise, with the reason in `bytes`: 404 (no data
+    // there, no such document) or 400 (the layer refused the request, e.g. an eps too fine for
+    // the tile); tile() and document() rethrow it as NotFound / InputError.
+    int failure = 0;
+};
+
+// Strong ETag of `bytes`: a 64-bit FNV-1a hash and the length, quoted.
+std::string make_etag(std::string_view bytes);
+
+class TileService {
+public:
+    TileService(std::vector<ServedLayer> layers,
+                const TileServiceOptions& options,
+                Metrics& metrics);
+    ~TileService(); // finishes queued generations, then joins the pool
+    TileService(const TileService&) = delete;
+    TileService& operator=(const TileService&) = delete;
+
+    const std::vector<ServedLayer>& layers() const { return layers_; }
+    const ServedLayer* find(const std::string& name) const; // nullptr when unknown
+
+    // The encoded tile, or nullptr when the generation queue is full (answer 503). Throws
+    // NotFound for an unknown layer, a format the layer does not serve, or a tile with no data;
+    // InputError for an id outside the scheme or an eps level the layer does not have.
+    std::shared_ptr<const Blob> tile(const std::string& layer,
+                                     const tiler::TileId& id,
+                                     tiler::Format format,
+                                     tiler::EpsChoice eps);
+
+    // A tileset document of the layer ("tileset.json", "subtrees/0/0/0.subtree", ...). Throws
+    // NotFound for an unknown layer or a path the layer has no document for.
+    std::shared_ptr<const Blob> document(const std::string& layer, const std::string& path);
+
+private:
+    struct Impl;
+    std::vector<ServedLayer> layers_;
+    std::unique_ptr<Impl> impl_;
+};
+
+} // namespace tb::server

@@ -1,0 +1,139 @@
+#pragma once
+// Shared helpers of the server tests: temp dirs, a small generated DEM, an in-process server
+// on an ephemeral loopback port, and Prometheus metric lookup.
+#include "config/config.hpp"
+#include "server/http_server.hpp"
+#include "server/metrics.hpp"
+#include "server/tile_service.hpp"
+
+#include <httplib.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <random>
+#include <sstream>
+#include <string>
+#include <thread>
+
+namespace tb::test {
+
+namespace fs = std::filesystem;
+
+struct TempDir {
+    fs::path path;
+    TempDir() {
+        std::random_device rd;
+        path = fs::temp_directory_path() /
+               ("tb_server_test_" + std::to_string(rd()) + "_" + std::to_string(rd()));
+        fs::create_directories(path);
+    }
+    ~TempDir() {
+        std::error_code ec;
+        fs::remove_all(path, ec);
+    }
+    std::string operator/(const std::string& name) const { return (path / name).string(); }
+};
+
+inline void write_file(const std::string& path, const std::string& text) {
+    std::ofstream out(path, std::ios::binary);
+    out << text;
+}
+
+inline std::string read_file(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    std::ostringstream s;
+    s << in.rdbuf();
+    return s.str();
+}
+
+// Writes an ESRI ASCII grid (+ .prj, WGS84) of `n` x `n` cells covering one degree from
+// (west, south): hills of a few hundred metres, so meshes have real work to do. GDAL reads it
+// as a georeferenced DEM; no GDAL is needed in the test itself.
+inline void write_dem(const std::string& path, int n = 257, double west = 11, double south = 57) {
+    std::ostringstream s;
+    const double cell = 1.0 / (n - 1);
+    s << "ncols " << n << "\nnrows " << n << "\nxllcorner " << west - cell / 2 << "\nyllcorner "
+      << south - cell / 2 << "\ncellsize " << cell << "\nNODATA_value -9999\n";
+    for (int j = 0; j < n; ++j) {
+        for (int i = 0; i < n; ++i) {
+            const double u = i * cell, v = j * cell;
+            const double h = 300 + 200 * std::sin(u * 9.1) * std::cos(v * 7.3) +
+                             60 * std::sin(u * 31 + v * 17) + 15 * std::cos(u * 83 - v * 61);
+            s << static_cast<int>(std::lround(h)) << (i + 1 < n ? " " : "\n");
+        }
+    }
+    write_file(path, s.str());
+    const auto dot = path.rfind('.');
+    write_file(path.substr(0, dot) + ".prj",
+               "GEOGCS[\"GCS_WGS_1984\",DATUM[\"D_WGS_1984\",SPHEROID[\"WGS_1984\",6378137.0,"
+               "298.257223563]],PRIMEM[\"Greenwich\",0.0],UNIT[\"Degree\",0.0174532925199433]]");
+}
+
+// The layer options the tests use: a small pyramid (zooms 5..8) of 64-sample tiles.
+inline tiler::LayerOptions test_layer_options(const std::string& dem, const std::string& name) {
+    tiler::LayerOptions o;
+    o.name = name;
+    o.sources = {dem};
+    o.tile_size = 64;
+    o.min_zoom = 5;
+    o.max_zoom = 8;
+    o.eps_levels = {5.0, 20.0};
+    return o;
+}
+
+// A TileService and HttpServer running in this process on 127.0.0.1:<ephemeral>.
+struct RunningServer {
+    server::Metrics metrics;
+    std::unique_ptr<server::TileService> tiles;
+    std::unique_ptr<server::HttpServer> http;
+    std::thread thread;
+    int port = 0;
+
+    RunningServer(std::vector<server::ServedLayer> layers,
+                  server::TileServiceOptions tile_options = {},
+                  server::HttpOptions http_options = {}) {
+        tiles = std::make_unique<server::TileService>(std::move(layers), tile_options, metrics);
+        http_options.host = "127.0.0.1";
+        http_options.port = 0;
+        http = std::make_unique<server::HttpServer>(*tiles, metrics, http_options);
+        port = http->bind();
+        thread = std::thread([this] { http->run(); });
+        for (int i = 0; i < 500 && !http->running(); ++i) {
+            std::this_thread::sleep_for(std::chrono::milliseconds(2));
+        }
+    }
+    ~RunningServer() {
+        http->stop();
+        thread.join();
+    }
+    httplib::Client client() const {
+        httplib::Client c("127.0.0.1", port);
+        c.set_read_timeout(30);
+        c.set_url_encode(false);
+        return c;
+    }
+};
+
+// The value of an unlabelled Prometheus sample `name` in `text`, or -1 when absent.
+inline double metric(const std::string& text, const std::string& name) {
+    std::istringstream in(text);
+    std::string line;
+    while (std::getline(in, line)) {
+        if (line.rfind(name + " ", 0) == 0) {
+            return std::stod(line.substr(name.size() + 1));
+        }
+    }
+    return -1;
+}
+
+inline double metric(int port, const std::string& name) {
+    httplib::Client c("127.0.0.1", port);
+    auto res = c.Get("/metrics");
+    return res && res->status == 200 ? metric(res->body, name) : -2;
+}
+
+} // namespace tb::test
