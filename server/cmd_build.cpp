@@ -1,20 +1,215 @@
-// terrabound build: not available yet.
+// terrabound build: pre-generate a layer's tile pyramid into a directory or an SQLite file.
+// The work is tiler/build.cpp; this file parses options, handles SIGINT/SIGTERM and reports.
+#include "core/error.hpp"
 #include "server/commands.hpp"
+#include "tiler/build.hpp"
+#include "tiler/log.hpp"
 
+#include <atomic>
+#include <csignal>
 #include <cstdio>
+#include <string>
+#include <vector>
 
 namespace tb::cli {
 namespace {
 
-int run(const Args&) {
-    std::fprintf(stderr, "terrabound build: not implemented yet; it arrives with the offline pyramid (issue 5)\n");
-    return 1;
+std::atomic<bool> g_stop{false};
+std::atomic<int> g_signal{0};
+
+extern "C" void on_signal(int sig) {
+    g_signal.store(sig);
+    g_stop.store(true);
+}
+
+std::vector<std::string> split(const std::string& text, char sep) {
+    std::vector<std::string> parts;
+    std::string part;
+    for (char c : text) {
+        if (c == sep) {
+            parts.push_back(part);
+            part.clear();
+        } else {
+            part += c;
+        }
+    }
+    parts.push_back(part);
+    return parts;
+}
+
+tiler::LonLatBox parse_bbox(const std::string& text) {
+    const auto parts = split(text, ',');
+    if (parts.size() != 4) {
+        throw InputError("build: --bbox '" + text + "': expected W,S,E,N (four numbers, degrees)");
+    }
+    tiler::LonLatBox b;
+    b.west = to_double(parts[0], "--bbox west");
+    b.south = to_double(parts[1], "--bbox south");
+    b.east = to_double(parts[2], "--bbox east");
+    b.north = to_double(parts[3], "--bbox north");
+    return b;
+}
+
+std::vector<tiler::Format> parse_formats(const std::string& text) {
+    std::vector<tiler::Format> formats;
+    for (const auto& name : split(text, ',')) {
+        const auto f = tiler::parse_format(name);
+        if (!f) {
+            throw InputError("build: --formats: unknown format '" + name +
+                             "'; expected a comma-separated list of glb, drc");
+        }
+        formats.push_back(*f);
+    }
+    return formats;
+}
+
+int to_zoom(const Args& args, const std::string& name) {
+    const long long z = args.get_int(name, 0);
+    if (z < 0 || z > tiler::kMaxZoom) {
+        throw InputError("build: --" + name + " " + std::to_string(z) + ": expected 0.." +
+                         std::to_string(tiler::kMaxZoom));
+    }
+    return static_cast<int>(z);
+}
+
+std::string human_bytes(std::int64_t bytes) {
+    char buf[32];
+    const double b = static_cast<double>(bytes);
+    if (b >= 1e9) {
+        std::snprintf(buf, sizeof buf, "%.2f GB", b / 1e9);
+    } else if (b >= 1e6) {
+        std::snprintf(buf, sizeof buf, "%.1f MB", b / 1e6);
+    } else {
+        std::snprintf(buf, sizeof buf, "%.1f kB", b / 1e3);
+    }
+    return buf;
+}
+
+int run(const Args& args) {
+    tiler::BuildOptions o;
+    o.layer.sources = args.positional;
+    if (o.layer.sources.empty()) {
+        throw InputError("build: name at least one DEM; see 'terrabound build --help'");
+    }
+    const auto out = args.get("o");
+    if (!out) {
+        throw InputError("build: name the output with -o OUT (a directory, or a file ending in "
+                         ".sqlite)");
+    }
+    o.output = *out;
+    if (auto v = args.get("layer")) {
+        o.layer.name = *v;
+    }
+    if (auto v = args.get("scheme")) {
+        o.layer.scheme = tiler::parse_scheme(*v);
+    }
+    if (args.has("size")) {
+        const long long n = args.get_int("size", 0);
+        if (n < 2 || n > 4096) {
+            throw InputError("build: --size " + std::to_string(n) + ": expected 2..4096");
+        }
+        o.layer.tile_size = static_cast<int>(n);
+    }
+    if (args.has("min-zoom")) {
+        o.layer.min_zoom = to_zoom(args, "min-zoom");
+    }
+    if (args.has("max-zoom")) {
+        o.layer.max_zoom = to_zoom(args, "max-zoom");
+    }
+    if (o.layer.min_zoom && o.layer.max_zoom && *o.layer.min_zoom > *o.layer.max_zoom) {
+        throw InputError("build: --min-zoom " + std::to_string(*o.layer.min_zoom) +
+                         " is above --max-zoom " + std::to_string(*o.layer.max_zoom));
+    }
+    if (args.has("eps-finest")) {
+        o.layer.finest_eps = args.get_double("eps-finest", 0);
+    }
+    if (auto v = args.get("bbox")) {
+        o.bbox = parse_bbox(*v);
+    }
+    if (auto v = args.get("formats")) {
+        o.formats = parse_formats(*v);
+    }
+    if (args.has("threads")) {
+        const long long n = args.get_int("threads", 0);
+        if (n < 1 || n > 1024) {
+            throw InputError("build: --threads " + std::to_string(n) + ": expected 1..1024");
+        }
+        o.threads = static_cast<int>(n);
+    }
+    if (auto v = args.get("shard")) {
+        o.shard = tiler::parse_shard(*v);
+    }
+    o.resume = args.has("resume");
+    o.force = args.has("force");
+    o.finalize = args.has("finalize");
+
+    // First SIGINT/SIGTERM: finish the tiles in flight and stop cleanly. The handler resets
+    // itself, so a second one stops at once (atomic writes keep the store valid even then).
+    struct sigaction action {};
+    action.sa_handler = on_signal;
+    action.sa_flags = SA_RESETHAND;
+    sigemptyset(&action.sa_mask);
+    sigaction(SIGINT, &action, nullptr);
+    sigaction(SIGTERM, &action, nullptr);
+
+    const tiler::BuildSummary s = tiler::build_pyramid(o, g_stop);
+    char seconds[32];
+    std::snprintf(seconds, sizeof seconds, "%.1f", s.seconds);
+
+    log::info("build: " + std::to_string(s.written) + " tiles written, " +
+              std::to_string(s.skipped) + " skipped (already there), " + std::to_string(s.empty) +
+              " empty, " + std::to_string(s.failed) + " failed, " + human_bytes(s.bytes) + ", " +
+              seconds + " s" + (s.tileset_written ? "; tileset written" : ""));
+    if (args.has("json")) {
+        std::printf("%s\n", tiler::to_json(s).c_str());
+        std::fflush(stdout);
+    }
+    if (s.interrupted) {
+        std::fprintf(stderr, "terrabound: build interrupted; run again with --resume\n");
+        return 128 + (g_signal.load() ? g_signal.load() : SIGINT);
+    }
+    if (s.failed > 0) {
+        std::fprintf(stderr,
+                     "terrabound: build: %lld tile(s) failed (see the errors above); fix the "
+                     "cause and run again with --resume\n",
+                     static_cast<long long>(s.failed));
+        return 1;
+    }
+    return 0;
 }
 
 }  // namespace
 
 const Command& build_command() {
-    static const Command command{{"build", "build INPUT... -o OUT", "Pre-generate a tile pyramid into a directory or an SQLite file.", {}, ""}, run};
+    static const Command command{
+        {"build",
+         "INPUT... -o OUT [options]",
+         "Pre-generate a tile pyramid into a directory or an SQLite file.",
+         {
+             {"o", "OUT", "output: a directory, or a file ending in .sqlite (or .db)"},
+             {"layer", "NAME", "layer name, [A-Za-z0-9_-]+ (default terrain)"},
+             {"scheme", "S", "geodetic (default) or mercator"},
+             {"size", "N", "tile raster is (N+1) x (N+1) samples (default 256)"},
+             {"min-zoom", "Z", "coarsest zoom (default: from the sources)"},
+             {"max-zoom", "Z", "finest zoom (default: from the sources' resolution)"},
+             {"eps-finest", "E", "vertical error bound at max zoom, metres; doubles per level up"},
+             {"bbox", "W,S,E,N", "only tiles meeting this box, degrees (no tileset is written)"},
+             {"formats", "LIST", "comma-separated: glb, drc (default glb)"},
+             {"threads", "N", "worker threads (default: one per core)"},
+             {"resume", "", "continue a build: same parameters, tiles already there are kept"},
+             {"force", "", "delete the layer's existing tiles and documents first"},
+             {"shard", "I/N", "build shard I of N (0-based; auto/N reads JOB_COMPLETION_INDEX "
+                              "or SLURM_ARRAY_TASK_ID); implies --resume"},
+             {"finalize", "", "after all shards: check they finished, then write the tileset"},
+             {"json", "", "also print the summary as one JSON line on stdout"},
+         },
+         "Tiles are written atomically and the tileset last, so a build can be killed at any\n"
+         "time and continued with --resume. Ctrl-C (SIGINT) or SIGTERM finishes the tiles in\n"
+         "flight and exits with 130/143; a second one stops at once. Without --resume or\n"
+         "--force an existing layer in OUT is an error. Sharded builds: run every shard I/N\n"
+         "against the same OUT (a shared directory, or one SQLite file on one machine), then\n"
+         "once 'terrabound build ... --finalize' with the same parameters."},
+        run};
     return command;
 }
 

@@ -15,12 +15,46 @@
 #include <cstdlib>
 
 #include <atomic>
+#include <filesystem>
 #include <map>
 #include <set>
 #include <thread>
 
 namespace tb::cli {
 namespace {
+
+// The viewer's directory: --web, else web/ beside the build directory (a source checkout), else
+// the installed copy. Empty when none holds index.html and CesiumJS (setup installs it).
+std::string find_web_root(const Args& args) {
+    namespace fs = std::filesystem;
+    if (auto dir = args.get("web")) {
+        if (*dir == "none") {
+            return "";
+        }
+        if (!fs::exists(fs::path(*dir) / "index.html")) {
+            throw InputError("--web " + *dir + ": no index.html there; name the viewer directory "
+                             "(the repository's web/) or 'none'");
+        }
+        return fs::absolute(*dir).lexically_normal().string();
+    }
+    std::error_code ec;
+    const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+    std::vector<fs::path> candidates;
+    if (!ec) {
+        candidates.push_back(exe.parent_path().parent_path() / "web");
+        candidates.push_back(exe.parent_path().parent_path() / "share" / "terrabound" / "web");
+    }
+    candidates.push_back(fs::current_path(ec) / "web");
+    for (const auto& dir : candidates) {
+        if (fs::exists(dir / "index.html", ec) &&
+            fs::exists(dir / "node_modules" / "cesium" / "Build" / "Cesium" / "Cesium.js", ec)) {
+            return fs::weakly_canonical(dir, ec).string();
+        }
+    }
+    log::warn("viewer not found (web/index.html with web/node_modules/cesium); / shows a plain "
+              "page. Run scripts/setup.sh, or pass --web DIR");
+    return "";
+}
 
 bool ends_with(const std::string& s, const std::string& suffix) {
     return s.size() >= suffix.size() &&
@@ -178,6 +212,16 @@ int run(const Args& args) {
     http_options.port = cfg.server.port;
     http_options.cors_origins = cfg.server.cors_origins;
     http_options.http_threads = std::max(16, 4 * threads);
+    http_options.web_root = find_web_root(args);
+    if (!http_options.web_root.empty()) {
+        for (const auto& layer : tiles.layers()) {
+            if (layer.layer->options().name == "web") {
+                throw InputError("layer name 'web' is taken by the viewer's files; rename the "
+                                 "layer or pass --web none");
+            }
+        }
+        log::info("viewer: " + http_options.web_root);
+    }
     server::HttpServer http(tiles, metrics, http_options);
     const int port = http.bind();
 
@@ -204,6 +248,7 @@ const Command& serve_command() {
          {{"host", "HOST", "address to listen on (default 127.0.0.1, or the config's)"},
           {"port", "PORT", "port to listen on (default 8080; 0 picks a free port)"},
           {"threads", "N", "tile generation threads (default: one per core)"},
+          {"web", "DIR", "the viewer's directory (default: web/ of this checkout; 'none': off)"},
           {"store",
            "PATH",
            "keep generated tiles in this store for every layer: a directory, or a file "

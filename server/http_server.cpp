@@ -14,6 +14,7 @@
 #include <chrono>
 #include <cstdio>
 #include <mutex>
+#include <fstream>
 #include <sstream>
 
 namespace tb::server {
@@ -448,9 +449,42 @@ struct HttpServer::Impl {
             res.set_header("Allow", "GET, HEAD, OPTIONS");
         });
 
-        server.Get("/", [this](const httplib::Request&, httplib::Response& res) {
+        if (!options.web_root.empty()) {
+            // The viewer's static files. cpp-httplib matches mount points before any route and
+            // refuses paths that climb out of the directory.
+            for (const auto& [ext, type] : std::initializer_list<std::pair<const char*, const char*>>{
+                     {"js", "text/javascript"},
+                     {"mjs", "text/javascript"},
+                     {"wasm", "application/wasm"},
+                     {"json", "application/json"},
+                     {"css", "text/css"},
+                     {"glb", "model/gltf-binary"}}) {
+                server.set_file_extension_and_mimetype_mapping(ext, type);
+            }
+            if (!server.set_mount_point("/web", options.web_root)) {
+                throw IoError(options.web_root + ": the viewer directory cannot be served");
+            }
+            server.set_file_request_handler(
+                [](const httplib::Request&, httplib::Response& res) {
+                    t_request.route = "web";
+                    res.set_header("Cache-Control", "public, max-age=3600");
+                });
+        }
+
+        server.Get("/", [this](const httplib::Request& req, httplib::Response& res) {
             t_request.route = "landing";
             res.set_header("Cache-Control", kNoStore);
+            if (!options.web_root.empty()) {
+                std::ifstream in(options.web_root + "/index.html", std::ios::binary);
+                std::ostringstream page;
+                page << in.rdbuf();
+                if (in && !page.str().empty()) {
+                    res.set_content(page.str(), "text/html; charset=utf-8");
+                    return;
+                }
+                log::warn(loggable(req) + ": " + options.web_root +
+                          "/index.html is unreadable; sending the plain landing page");
+            }
             res.set_content(landing_html(), "text/html; charset=utf-8");
         });
 

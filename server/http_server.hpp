@@ -1,6 +1,7 @@
 #pragma once
 // The HTTP front of `terrabound serve` (cpp-httplib; not visible in this header). Routes:
-//   GET /                               landing page (HTML)
+//   GET /                               the 3D viewer (web_root/index.html), or a landing page
+//   GET /web/{path}                     the viewer's files under web_root (CesiumJS, three.js)
 //   GET /layers                         the layers as JSON
 //   GET /health                         {"status":"ok"}
 //   GET /metrics                        Prometheus text
@@ -21,6 +22,7 @@ struct HttpOptions {
     int port = 8080; // 0: any free port (see bind())
     std::vector<std::string> cors_origins = {"*"};
     int http_threads = 16; // connection-handling threads
+    std::string web_root;   // the viewer's directory (index.html, node_modules/); empty: none
 };
 
 // Longest request target accepted; longer ones get 414.
