@@ -193,7 +193,16 @@ bool tileset_document(const TilesetSpec& spec, const std::string& path, std::str
                    spec.min_height,
                    spec.max_height};
         }
-        const double root_error = 2 * max_error;
+        // The virtual root has nothing to draw, so a client must always refine it: its error is
+        // the size of the whole region (at least twice its children's), which makes its
+        // screen-space error exceed any sensible threshold at every distance a view of the
+        // layer can have.
+        const double region_size =
+            kMinRadius * std::hypot(all.north - all.south,
+                                    (all.east - all.west) *
+                                        std::cos(std::min(std::abs(all.south),
+                                                          std::abs(all.north))));
+        const double root_error = std::max(2 * max_error, region_size);
         std::string root = R"({"boundingVolume":)" + region_json(all) + R"(,"geometricError":)" +
                            number(root_error) + R"(,"refine":"REPLACE","children":[)" + kids + "]}";
         out = document(2 * root_error, root);

@@ -6,7 +6,6 @@
 //   layer=NAME     layer shown first (default: the first one of /layers)
 //   server=URL     tile server origin when the page is served from elsewhere (default: this page's)
 //   test=1         no fly animation (the browser tests set it; they drive window.tb)
-//   stock=1        no viewer-side help for the tileset (see showLayer): plain CesiumJS behaviour
 /* global Cesium */
 'use strict';
 
@@ -14,7 +13,6 @@
   const params = new URLSearchParams(location.search);
   const server = (params.get('server') || '').replace(/\/+$/, '');
   const testMode = params.get('test') === '1';
-  const stock = params.get('stock') === '1';
 
   const el = (id) => document.getElementById(id);
   const statusEl = el('status');
@@ -219,14 +217,7 @@
     setStatus(`loading ${name}…`);
     const url = `${server}/${encodeURIComponent(name)}/tileset.json`;
     const tileset = await Cesium.Cesium3DTileset.fromUrl(url, { customShader: terrainShader });
-    // terrabound's root is a virtual tile without content whose geometricError (twice its
-    // largest child's) includes chord sag, so from an overview distance CesiumJS would not refine
-    // it and draw nothing. A root without content has nothing to show: always refine it.
-    // (?stock=1 keeps CesiumJS's own behaviour; the acceptance test of the tileset uses it.)
     tb.rootGeometricError = tileset.root.geometricError;
-    if (!stock && !tileset.root.hasRenderableContent) {
-      tileset.root.geometricError = 1e9;
-    }
     const range = heightRange(tileset.root);
     if (range) {
       terrainShader.setUniform('u_minHeight', range[0]);

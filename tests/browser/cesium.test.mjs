@@ -96,13 +96,10 @@ test('CesiumJS loads the tileset from terrabound with no failed tile or console 
     await page.close();
   });
 
-// Stock CesiumJS (no viewer-side help) at the viewer's overview: terrabound's virtual root has
-// no content and a geometricError (twice its largest child's, chord sag included) too small for
-// CesiumJS to refine it from there, so nothing is drawn. Kept as a todo until tiler/tileset.cpp
-// gives the content-less root a geometricError large enough to always refine (see the report).
+// Plain CesiumJS at the viewer's overview distance: the tileset alone (its content-less root
+// must always refine) has to bring terrain on screen.
 test('stock CesiumJS draws the layer at the overview distance',
-  { skip: skip || false, timeout: 120000,
-    todo: 'tileset root geometricError too small for CesiumJS to refine it (tiler/tileset.cpp)' }, async (t) => {
+  { skip: skip || false, timeout: 120000 }, async (t) => {
     const { page, record } = await openPage(browser.context);
     await page.goto(`${pages.origin}/?test=1&stock=1&${pages.query}`, { waitUntil: 'load' });
     await page.evaluate(() => window.tb.ready);
