@@ -1,0 +1,179 @@
+// Mesher benchmark (not a test): meshes fixed heightmaps at a list of eps and prints one TSV
+// line per case:  input size eps ms triangles achieved_max_err peer_triangles ratio
+// (the peer columns are "-" here; bench/mesh_bench.sh fills them from delatin's run).
+// Exits 1 if any achieved_max_err > eps: the bound is the product, speed is secondary.
+//
+// usage: mesh_bench [--reps N] [--json DIR] INPUT EPS[,EPS...] [INPUT EPS... ...]
+//   INPUT = NAME=FILE.f32:W:H  raw little-endian float32, row-major (shared/bench format)
+//         | synth:SEED:W:H     seeded synthetic terrain (ridges + noise, 0.1 height steps)
+// --json DIR writes every mesh as DIR/NAME-epsE.json for shared/bench's linf_check.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "core/triangulate.hpp"
+
+namespace {
+
+using tb::core::HeightGrid;
+
+// Synthetic terrain: a few octaves of smoothed value noise plus a ridge, quantized to 0.1 like
+// a DEM. Deterministic for a seed (its own LCG, no <random> distribution differences).
+HeightGrid synth(std::uint64_t seed, int w, int h) {
+    HeightGrid g;
+    g.width = w;
+    g.height = h;
+    g.heights.assign(static_cast<std::size_t>(w) * h, 0.0f);
+    std::uint64_t state = seed * 6364136223846793005ULL + 1442695040888963407ULL;
+    auto rnd = [&state]() {
+        state = state * 6364136223846793005ULL + 1442695040888963407ULL;
+        return static_cast<double>(state >> 11) / 9007199254740992.0;
+    };
+    double amp = 400.0;
+    for (int cell = 256; cell >= 4; cell /= 2, amp *= 0.5) {
+        const int gw = w / cell + 2, gh = h / cell + 2;
+        std::vector<double> lat(static_cast<std::size_t>(gw) * gh);
+        for (auto& v : lat) {
+            v = (rnd() - 0.5) * amp;
+        }
+        for (int y = 0; y < h; ++y) {
+            for (int x = 0; x < w; ++x) {
+                const double fx = static_cast<double>(x) / cell, fy = static_cast<double>(y) / cell;
+                const int ix = static_cast<int>(fx), iy = static_cast<int>(fy);
+                double tx = fx - ix, ty = fy - iy;
+                tx = tx * tx * (3 - 2 * tx);
+                ty = ty * ty * (3 - 2 * ty);
+                auto L = [&](int i, int j) { return lat[static_cast<std::size_t>(j) * gw + i]; };
+                const double v = (L(ix, iy) * (1 - tx) + L(ix + 1, iy) * tx) * (1 - ty) +
+                                 (L(ix, iy + 1) * (1 - tx) + L(ix + 1, iy + 1) * tx) * ty;
+                g.heights[static_cast<std::size_t>(y) * w + x] += static_cast<float>(v);
+            }
+        }
+    }
+    for (int y = 0; y < h; ++y) {
+        for (int x = 0; x < w; ++x) {
+            float& z = g.heights[static_cast<std::size_t>(y) * w + x];
+            const double ridge = 300.0 - 2.0 * std::abs(x - 0.6 * y - 0.2 * w);
+            z = static_cast<float>(std::round((z + std::max(0.0, ridge)) * 10.0) / 10.0);
+        }
+    }
+    return g;
+}
+
+bool load(const std::string& spec, std::string& name, HeightGrid& g) {
+    std::vector<std::string> parts;
+    std::stringstream ss(spec);
+    for (std::string p; std::getline(ss, p, ':');) {
+        parts.push_back(p);
+    }
+    if (parts.size() == 4 && parts[0] == "synth") {
+        g = synth(std::stoull(parts[1]), std::stoi(parts[2]), std::stoi(parts[3]));
+        name = "synth";
+        name.append(parts[1]).append("-").append(parts[2]);
+        return true;
+    }
+    const auto eq = spec.find('=');
+    if (parts.size() != 3 || eq == std::string::npos) {
+        return false;
+    }
+    name = spec.substr(0, eq);
+    const std::string file = parts[0].substr(eq + 1);
+    g.width = std::stoi(parts[1]);
+    g.height = std::stoi(parts[2]);
+    g.heights.resize(static_cast<std::size_t>(g.width) * g.height);
+    std::ifstream in(file, std::ios::binary);
+    in.read(reinterpret_cast<char*>(g.heights.data()),
+            static_cast<std::streamsize>(g.heights.size() * sizeof(float)));
+    if (!in) {
+        std::cerr << "mesh_bench: " << file << ": cannot read " << g.heights.size()
+                  << " float32 samples\n";
+        std::exit(2);
+    }
+    return true;
+}
+
+void write_json(const std::string& path, const tb::core::Mesh& m) {
+    std::ofstream out(path);
+    out.precision(17); // the float heights exactly, so the checker sees the grid's z
+    out << "{\"vertices\":[";
+    for (std::size_t v = 0; v < m.points.size(); ++v) {
+        out << (v ? "," : "") << m.points[v].x << ',' << m.points[v].y << ','
+            << static_cast<double>(m.z[v]);
+    }
+    out << "],\"triangles\":[";
+    for (std::size_t e = 0; e < m.triangles.size(); ++e) {
+        out << (e ? "," : "") << m.triangles[e];
+    }
+    out << "]}\n";
+}
+
+} // namespace
+
+int main(int argc, char** argv) {
+    int reps = 3;
+    std::string json_dir;
+    std::vector<std::string> args(argv + 1, argv + argc);
+    for (std::size_t i = 0; i < args.size();) {
+        if (args[i] == "--reps" && i + 1 < args.size()) {
+            reps = std::max(1, std::stoi(args[i + 1]));
+            args.erase(args.begin() + static_cast<std::ptrdiff_t>(i),
+                       args.begin() + static_cast<std::ptrdiff_t>(i) + 2);
+        } else if (args[i] == "--json" && i + 1 < args.size()) {
+            json_dir = args[i + 1];
+            args.erase(args.begin() + static_cast<std::ptrdiff_t>(i),
+                       args.begin() + static_cast<std::ptrdiff_t>(i) + 2);
+        } else {
+            ++i;
+        }
+    }
+    if (args.empty() || args.size() % 2 != 0) {
+        std::cerr << "usage: mesh_bench [--reps N] [--json DIR] INPUT EPS[,EPS...] ...\n"
+                     "  INPUT = NAME=FILE.f32:W:H | synth:SEED:W:H\n";
+        return 2;
+    }
+    bool ok = true;
+    std::cout << "input\tsize\teps\tms\ttriangles\tachieved_max_err\tpeer_triangles\tratio\n";
+    for (std::size_t i = 0; i < args.size(); i += 2) {
+        std::string name;
+        HeightGrid g;
+        if (!load(args[i], name, g)) {
+            std::cerr << "mesh_bench: bad input spec " << args[i] << "\n";
+            return 2;
+        }
+        std::stringstream ss(args[i + 1]);
+        for (std::string e; std::getline(ss, e, ',');) {
+            const double eps = std::stod(e);
+            std::vector<double> times;
+            tb::core::Mesh mesh;
+            for (int r = 0; r < reps; ++r) {
+                const auto t0 = std::chrono::steady_clock::now();
+                mesh = tb::core::triangulate(g, {.eps = eps, .lock_border = true});
+                const auto t1 = std::chrono::steady_clock::now();
+                times.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
+            }
+            std::sort(times.begin(), times.end());
+            const double err = tb::core::max_error(mesh, g);
+            ok = ok && err <= eps;
+            std::printf("%s\t%dx%d\t%s\t%.1f\t%zu\t%.6g\t-\t-\n",
+                        name.c_str(),
+                        g.width,
+                        g.height,
+                        e.c_str(),
+                        times[times.size() / 2],
+                        mesh.triangle_count(),
+                        err);
+            std::fflush(stdout);
+            if (!json_dir.empty()) {
+                write_json(json_dir + "/" + name + "-eps" + e + ".json", mesh);
+            }
+        }
+    }
+    return ok ? 0 : 1;
+}

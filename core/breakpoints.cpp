@@ -1,0 +1,218 @@
+// Lu & Yun §3.1 "Initial Triangulation": the optimal PL curve fit (OPLA) of a scan line by a
+// shortest-hop search over the samples, and the collection of the anchor points.
+#include "core/breakpoints.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "core/error.hpp"
+#include "core/predicates.hpp"
+#include "core/triangulate.hpp"
+
+namespace tb::core {
+namespace {
+
+bool is_valid(std::span<const std::uint8_t> valid, int k) {
+    return valid.empty() || valid[static_cast<std::size_t>(k)] != 0;
+}
+
+// Worst valid sample strictly between i and j, and its error against the segment.
+int worst_between(
+    std::span<const float> z, std::span<const std::uint8_t> valid, int i, int j, double& worst) {
+    worst = -1.0;
+    int at = -1;
+    for (int k = i + 1; k < j; ++k) {
+        if (!is_valid(valid, k)) {
+            continue;
+        }
+        const double e = std::abs(
+            lerp_steps(
+                z[static_cast<std::size_t>(i)], z[static_cast<std::size_t>(j)], k - i, j - i) -
+            static_cast<double>(z[static_cast<std::size_t>(k)]));
+        if (e > worst) {
+            worst = e;
+            at = k;
+        }
+    }
+    return at;
+}
+
+// Appends the breakpoints of [i, j] after i (excluding i), splitting at the worst sample until
+// every segment passes the exact test. Only reached when the slope tunnel and the exact edge
+// interpolation disagree in the last bit.
+void append_verified(std::span<const float> z,
+                     std::span<const std::uint8_t> valid,
+                     double eps,
+                     int i,
+                     int j,
+                     std::vector<int>& out) {
+    double worst = 0.0;
+    const int k = worst_between(z, valid, i, j, worst);
+    if (k < 0 || worst <= eps) {
+        out.push_back(j);
+        return;
+    }
+    append_verified(z, valid, eps, i, k, out);
+    append_verified(z, valid, eps, k, j, out);
+}
+
+} // namespace
+
+bool segment_fits(
+    std::span<const float> z, std::span<const std::uint8_t> valid, double eps, int i, int j) {
+    double worst = 0.0;
+    const int k = worst_between(z, valid, i, j, worst);
+    return k < 0 || worst <= eps;
+}
+
+std::vector<int>
+fit_breakpoints(std::span<const float> z, std::span<const std::uint8_t> valid, double eps) {
+    const int n = static_cast<int>(z.size());
+    TB_ASSERT(n >= 2);
+    TB_ASSERT(valid.empty() || valid.size() == z.size());
+    TB_ASSERT(eps > 0.0);
+    // Shortest hops from 0: a hop i -> j is allowed when the segment stays within the eps
+    // tunnel of every valid sample between, i.e. its slope lies in the intersection of the
+    // slope windows [(z_k - eps - z_i) / (k - i), (z_k + eps - z_i) / (k - i)].
+    constexpr int kUnreached = std::numeric_limits<int>::max();
+    std::vector<int> hops(static_cast<std::size_t>(n), kUnreached);
+    std::vector<int> from(static_cast<std::size_t>(n), -1);
+    hops[0] = 0;
+    for (int i = 0; i < n - 1; ++i) {
+        // Hop counts only grow along the scan, so every i is final when reached here.
+        const int next_hops = hops[static_cast<std::size_t>(i)] + 1;
+        const double zi = z[static_cast<std::size_t>(i)];
+        double lo = -std::numeric_limits<double>::infinity();
+        double hi = std::numeric_limits<double>::infinity();
+        for (int j = i + 1; j < n; ++j) {
+            const double zj = z[static_cast<std::size_t>(j)];
+            const double run = j - i;
+            const double slope = (zj - zi) / run;
+            if (slope >= lo && slope <= hi && next_hops < hops[static_cast<std::size_t>(j)]) {
+                hops[static_cast<std::size_t>(j)] = next_hops;
+                from[static_cast<std::size_t>(j)] = i;
+            }
+            if (is_valid(valid, j)) {
+                lo = std::max(lo, (zj - eps - zi) / run);
+                hi = std::min(hi, (zj + eps - zi) / run);
+                if (lo > hi) {
+                    break;
+                }
+            }
+        }
+    }
+    std::vector<int> chain;
+    for (int v = n - 1; v >= 0; v = from[static_cast<std::size_t>(v)]) {
+        chain.push_back(v);
+        if (v == 0) {
+            break;
+        }
+    }
+    std::reverse(chain.begin(), chain.end());
+    TB_ASSERT(chain.front() == 0 && chain.back() == n - 1);
+    std::vector<int> out{0};
+    for (std::size_t s = 1; s < chain.size(); ++s) {
+        append_verified(z, valid, eps, chain[s - 1], chain[s], out);
+    }
+    return out;
+}
+
+std::vector<int> border_breakpoints(const HeightGrid& grid, double eps, int side) {
+    const int w = grid.width;
+    const int h = grid.height;
+    const bool row = side < 2;
+    const int n = row ? w : h;
+    std::vector<float> z(static_cast<std::size_t>(n));
+    std::vector<std::uint8_t> valid;
+    if (!grid.valid.empty()) {
+        valid.resize(static_cast<std::size_t>(n));
+    }
+    for (int k = 0; k < n; ++k) {
+        const int x = row ? k : (side == 2 ? 0 : w - 1);
+        const int y = row ? (side == 0 ? 0 : h - 1) : k;
+        z[static_cast<std::size_t>(k)] = grid.at(x, y);
+        if (!valid.empty()) {
+            valid[static_cast<std::size_t>(k)] = grid.is_valid(x, y) ? 1 : 0;
+        }
+    }
+    return fit_breakpoints(z, valid, eps);
+}
+
+namespace {
+
+std::vector<int> column_breakpoints(const HeightGrid& grid, double eps, int x) {
+    std::vector<float> z(static_cast<std::size_t>(grid.height));
+    std::vector<std::uint8_t> valid;
+    if (!grid.valid.empty()) {
+        valid.resize(z.size());
+    }
+    for (int y = 0; y < grid.height; ++y) {
+        z[static_cast<std::size_t>(y)] = grid.at(x, y);
+        if (!valid.empty()) {
+            valid[static_cast<std::size_t>(y)] = grid.is_valid(x, y) ? 1 : 0;
+        }
+    }
+    return fit_breakpoints(z, valid, eps);
+}
+
+std::vector<int> row_breakpoints(const HeightGrid& grid, double eps, int y) {
+    const auto first = grid.heights.begin() + static_cast<std::ptrdiff_t>(y) * grid.width;
+    std::span<const float> z(&*first, static_cast<std::size_t>(grid.width));
+    std::span<const std::uint8_t> valid;
+    if (!grid.valid.empty()) {
+        valid = std::span<const std::uint8_t>(grid.valid.data() +
+                                                  static_cast<std::size_t>(y) * grid.width,
+                                              static_cast<std::size_t>(grid.width));
+    }
+    return fit_breakpoints(z, valid, eps);
+}
+
+} // namespace
+
+std::vector<GridPoint> anchor_points(const HeightGrid& grid, double eps) {
+    const int w = grid.width;
+    const int h = grid.height;
+    std::vector<GridPoint> pts;
+    const auto top = border_breakpoints(grid, eps, 0);
+    const auto bottom = border_breakpoints(grid, eps, 1);
+    const auto left = border_breakpoints(grid, eps, 2);
+    const auto right = border_breakpoints(grid, eps, 3);
+    for (int x : top) {
+        pts.push_back({x, 0});
+    }
+    for (int x : bottom) {
+        pts.push_back({x, h - 1});
+    }
+    for (int y : left) {
+        pts.push_back({0, y});
+    }
+    for (int y : right) {
+        pts.push_back({w - 1, y});
+    }
+    // Vertical scan lines from the horizontal border with fewer breakpoints (top on ties).
+    const auto& cols = bottom.size() < top.size() ? bottom : top;
+    for (std::size_t i = 1; i + 1 < cols.size(); ++i) {
+        const int x = cols[i];
+        // Only the scan line's interior breakpoints: its ends lie on the other two borders,
+        // whose vertices are exactly their own fits.
+        const auto ys = column_breakpoints(grid, eps, x);
+        for (std::size_t k = 1; k + 1 < ys.size(); ++k) {
+            pts.push_back({x, ys[k]});
+        }
+    }
+    // Horizontal scan lines from the vertical border with fewer breakpoints (left on ties).
+    const auto& rows = right.size() < left.size() ? right : left;
+    for (std::size_t i = 1; i + 1 < rows.size(); ++i) {
+        const int y = rows[i];
+        const auto xs = row_breakpoints(grid, eps, y);
+        for (std::size_t k = 1; k + 1 < xs.size(); ++k) {
+            pts.push_back({xs[k], y});
+        }
+    }
+    std::sort(pts.begin(), pts.end(), raster_less);
+    pts.erase(std::unique(pts.begin(), pts.end()), pts.end());
+    return pts;
+}
+
+} // namespace tb::core

@@ -1,0 +1,42 @@
+#pragma once
+// Lu & Yun §3.1: optimal 1-D piecewise-linear fits (OPLA) and the anchor points of the
+// initial triangulation.
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "core/mesh.hpp"
+
+namespace tb::core {
+
+// Optimal piecewise-linear fit of one scan line.
+// Inputs: z[0..n) heights (n >= 2) at unit steps; valid is empty or has n entries (0 = the
+// sample constrains nothing); eps > 0 in the heights' unit.
+// Returns the breakpoint indices, increasing, first 0 and last n-1: the fewest breakpoints such
+// that every valid sample k is within eps of the chain, with the chain evaluated exactly as the
+// mesh evaluates an edge (lerp_steps from the lower index). The result is a pure function of
+// (z, valid, eps): two tiles reading the same border in the same direction get the same points.
+// Ties between optimal chains are broken deterministically (each breakpoint is reached from the
+// lowest-index predecessor at the same hop count). O(n * reach).
+std::vector<int>
+fit_breakpoints(std::span<const float> z, std::span<const std::uint8_t> valid, double eps);
+
+// True when the segment from sample i to sample j (i < j) keeps every valid sample in between
+// within eps (the exact test the fit is verified with).
+bool segment_fits(
+    std::span<const float> z, std::span<const std::uint8_t> valid, double eps, int i, int j);
+
+struct HeightGrid;
+
+// The anchor points of §3.1: the breakpoints of the four borders (rows read left to right,
+// columns top to bottom), then the breakpoints of the vertical scan lines through the interior
+// breakpoints of the horizontal border with fewer breakpoints, and of the horizontal scan lines
+// through those of the vertical border with fewer breakpoints. Sorted in raster order, unique,
+// always containing the four corners.
+std::vector<GridPoint> anchor_points(const HeightGrid& grid, double eps);
+
+// The breakpoints of one border: side 0 = top row (y = 0), 1 = bottom row, 2 = left column
+// (x = 0), 3 = right column; positions along the border.
+std::vector<int> border_breakpoints(const HeightGrid& grid, double eps, int side);
+
+} // namespace tb::core

@@ -1,0 +1,145 @@
+// The guarantee checks: check_mesh (exact tiling) and max_error (exact L-infinity error).
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include "core/error.hpp"
+#include "core/predicates.hpp"
+#include "core/triangulate.hpp"
+
+namespace tb::core {
+namespace {
+
+[[noreturn]] void fail(const std::string& what) {
+    throw Error("check_mesh: " + what);
+}
+
+std::string at(std::size_t t) {
+    return "triangle " + std::to_string(t);
+}
+
+} // namespace
+
+void check_mesh(const Mesh& mesh, int width, int height) {
+    const std::size_t ne = mesh.triangles.size();
+    if (ne % 3 != 0 || mesh.halfedges.size() != ne) {
+        fail("triangles and halfedges sizes disagree");
+    }
+    if (mesh.z.size() != mesh.points.size()) {
+        fail("z and points sizes disagree");
+    }
+    for (const GridPoint& p : mesh.points) {
+        if (p.x < 0 || p.y < 0 || p.x >= width || p.y >= height) {
+            fail("vertex off the grid at x=" + std::to_string(p.x) + " y=" + std::to_string(p.y));
+        }
+    }
+    const auto on_boundary = [&](GridPoint a, GridPoint b) {
+        return (a.x == 0 && b.x == 0) || (a.y == 0 && b.y == 0) ||
+               (a.x == width - 1 && b.x == width - 1) || (a.y == height - 1 && b.y == height - 1);
+    };
+    std::int64_t doubled = 0;
+    for (std::size_t e = 0; e < ne; ++e) {
+        if (mesh.triangles[e] >= mesh.points.size()) {
+            fail("half-edge " + std::to_string(e) + " starts at no vertex");
+        }
+    }
+    for (std::size_t t = 0; t < ne / 3; ++t) {
+        const GridPoint a = mesh.points[mesh.triangles[3 * t]];
+        const GridPoint b = mesh.points[mesh.triangles[3 * t + 1]];
+        const GridPoint c = mesh.points[mesh.triangles[3 * t + 2]];
+        const std::int64_t area = orient2d(a, b, c);
+        if (area <= 0) {
+            fail(at(t) + (area == 0 ? " has zero area" : " is clockwise"));
+        }
+        doubled += area;
+    }
+    for (std::size_t e = 0; e < ne; ++e) {
+        const Index ei = static_cast<Index>(e);
+        const Index twin = mesh.halfedges[e];
+        const Index from = mesh.triangles[e];
+        const Index to = mesh.triangles[next_edge(ei)];
+        if (twin == kNone) {
+            if (!on_boundary(mesh.points[from], mesh.points[to])) {
+                fail("border half-edge " + std::to_string(e) + " of " + at(e / 3) +
+                     " is not on the grid boundary (T-junction or hole)");
+            }
+            continue;
+        }
+        if (twin >= ne || mesh.halfedges[twin] != ei) {
+            fail("half-edge " + std::to_string(e) + " and its twin disagree");
+        }
+        if (mesh.triangles[twin] != to || mesh.triangles[next_edge(twin)] != from) {
+            fail("half-edge " + std::to_string(e) + " and its twin join different vertices");
+        }
+    }
+    const std::int64_t want = 2 * std::int64_t{width - 1} * (height - 1);
+    if (doubled != want) {
+        fail("triangles cover doubled area " + std::to_string(doubled) + ", expected " +
+             std::to_string(want));
+    }
+}
+
+double max_error(const Mesh& mesh, const HeightGrid& grid) {
+    // Every triangle is scanned over its closed area, so a sample on an edge is judged by every
+    // triangle that touches it; a valid sample covered by none makes the error infinite.
+    const int w = grid.width;
+    std::vector<std::uint8_t> covered(static_cast<std::size_t>(w) * grid.height, 0);
+    double worst = 0.0;
+    for (std::size_t t = 0; t < mesh.triangle_count(); ++t) {
+        const Index ia = mesh.triangles[3 * t], ib = mesh.triangles[3 * t + 1],
+                    ic = mesh.triangles[3 * t + 2];
+        const GridPoint a = mesh.points[ia], b = mesh.points[ib], c = mesh.points[ic];
+        const double za = mesh.z[ia], zb = mesh.z[ib], zc = mesh.z[ic];
+        const double inv_area = inverse_area(a, b, c);
+        const int y0 = std::min({a.y, b.y, c.y}), y1 = std::max({a.y, b.y, c.y});
+        const int x0 = std::min({a.x, b.x, c.x}), x1 = std::max({a.x, b.x, c.x});
+        const GridPoint from[3] = {b, c, a};
+        const GridPoint to[3] = {c, a, b};
+        for (int y = y0; y <= y1; ++y) {
+            // The closed triangle's span on row y: orient2d(from, to, (x, y)) >= 0 per edge.
+            std::int64_t lo = x0, hi = x1;
+            for (int k = 0; k < 3; ++k) {
+                const std::int64_t dx = std::int64_t{to[k].x} - from[k].x;
+                const std::int64_t dy = std::int64_t{to[k].y} - from[k].y;
+                const std::int64_t base = dx * (y - from[k].y) + dy * from[k].x; // - dy * x
+                if (dy < 0) {
+                    lo = std::max(lo, ceil_div(-base, -dy));
+                } else if (dy > 0) {
+                    hi = std::min(hi, floor_div(base, dy));
+                } else if (base < 0) {
+                    hi = lo - 1;
+                }
+            }
+            if (lo > hi) {
+                continue;
+            }
+            const GridPoint first{static_cast<std::int32_t>(lo), y};
+            std::int64_t wa = orient2d(b, c, first);
+            std::int64_t wb = orient2d(c, a, first);
+            std::int64_t wc = orient2d(a, b, first);
+            const std::int64_t sa = -(std::int64_t{c.y} - b.y), sb = -(std::int64_t{a.y} - c.y),
+                               sc = -(std::int64_t{b.y} - a.y);
+            for (std::int64_t xx = lo; xx <= hi; ++xx, wa += sa, wb += sb, wc += sc) {
+                const GridPoint p{static_cast<std::int32_t>(xx), y};
+                TB_ASSERT(wa >= 0 && wb >= 0 && wc >= 0);
+                TB_ASSERT(wa == orient2d(b, c, p) && wc == orient2d(a, b, p));
+                const std::size_t idx = static_cast<std::size_t>(y) * w + p.x;
+                covered[idx] = 1;
+                if (!grid.is_valid(p.x, y)) {
+                    continue;
+                }
+                const double z = interpolate(a, za, b, zb, c, zc, wa, wb, wc, inv_area, p);
+                worst = std::max(worst, std::abs(z - static_cast<double>(grid.heights[idx])));
+            }
+        }
+    }
+    for (std::size_t i = 0; i < covered.size(); ++i) {
+        if (covered[i] == 0 && (grid.valid.empty() || grid.valid[i] != 0)) {
+            return std::numeric_limits<double>::infinity();
+        }
+    }
+    return worst;
+}
+
+} // namespace tb::core

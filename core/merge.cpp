@@ -1,0 +1,406 @@
+// Lu & Yun §3.4 "Merge": the merge agent (economist). Vertices are visited flattest
+// neighbourhood first (largest deviation of the incident triangle normals from their
+// area-weighted mean normal); a vertex is removed and its hole re-triangulated optimally
+// (polygon_dp.cpp) when that does not increase the neighbourhood's error points. Border
+// vertices are removed only when the border is not locked, only along a straight border, and
+// never at the four corners.
+#include <algorithm>
+#include <array>
+#include <climits>
+#include <cmath>
+#include <functional>
+
+#include "core/error.hpp"
+#include "core/polygon_dp.hpp"
+#include "core/predicates.hpp"
+#include "core/refiner.hpp"
+
+namespace tb::core {
+namespace {
+
+// Larger holes are left alone: the dynamic program is cubic in the hole's size.
+constexpr std::size_t kMaxHole = 24;
+// Candidate triangles are estimated on every kStride-th row and column, except those smaller
+// than kSmallTriangle (doubled area), which are scanned in full at once.
+constexpr int kStride = 2;
+constexpr std::int64_t kSmallTriangle = 64;
+// Re-runs of the dynamic program after a chosen triangle fails its full scan.
+constexpr int kMaxAttempts = 6;
+
+// Visit order: flattest neighbourhood first, with the flatness (largest deviation 1 - cos of
+// an incident normal from the mean normal) taken by octaves; within an octave, fewer error
+// points in the neighbourhood, then position along a Z-order curve (unique per vertex). The
+// octaves keep the paper's priority while the vertices of a class are visited close to each
+// other in memory. The total error is not a tie-breaker: being continuous it would scatter the
+// visits again. On the 1025x1025 Andes tile this merges about 25% faster than the exact order
+// and ends with 0.2% fewer triangles: the exact order is no better for the final count.
+struct Candidate {
+    int flatness_class;
+    std::int64_t error_points;
+    std::uint64_t z_order;
+    Index v;
+    friend bool operator<(const Candidate& a, const Candidate& b) {
+        if (a.flatness_class != b.flatness_class) {
+            return a.flatness_class < b.flatness_class;
+        }
+        if (a.error_points != b.error_points) {
+            return a.error_points < b.error_points;
+        }
+        return a.z_order < b.z_order;
+    }
+};
+
+int flatness_class(double deviation) {
+    if (!(deviation > 0.0)) {
+        return INT_MIN; // a perfectly flat (or degenerate) neighbourhood
+    }
+    int exponent = 0;
+    std::frexp(deviation, &exponent);
+    return exponent;
+}
+
+std::uint64_t z_order(GridPoint p) {
+    std::uint64_t out = 0;
+    for (int b = 0; b < 21; ++b) {
+        out |= ((static_cast<std::uint64_t>(p.x) >> b) & 1u) << (2 * b);
+        out |= ((static_cast<std::uint64_t>(p.y) >> b) & 1u) << (2 * b + 1);
+    }
+    return out;
+}
+
+} // namespace
+
+bool Refiner::try_remove(Index v, std::vector<Index>& ring) {
+    tin_.ring(v, ring);
+    const bool border = tin_.halfedges[ring.front()] == kNone;
+    auto& poly = scratch_.poly;
+    auto& pts = scratch_.pts;
+    poly.clear();
+    pts.clear();
+    std::int64_t before = 0;
+    for (Index e : ring) {
+        poly.push_back(tin_.triangles[next_edge(e)]);
+        if (error_points_ != 0) {
+            before += stats_[e / 3].error_points;
+        }
+    }
+    if (border) {
+        // The last neighbour, reached over the last triangle's far edge.
+        poly.push_back(tin_.triangles[prev_edge(ring.back())]);
+    }
+    if (poly.size() > kMaxHole || poly.size() < 3) {
+        return false;
+    }
+    for (Index w : poly) {
+        pts.push_back(tin_.points[w]);
+    }
+    if (border && orient2d(pts.back(), tin_.points[v], pts.front()) != 0) {
+        return false; // a corner
+    }
+    const std::size_t n = poly.size();
+    // The removed vertex is itself a sample the new triangles must honour (when the
+    // neighbourhood is clean, as after a full split). Its height must lie within eps of the
+    // hole's height range, since interpolation never leaves it.
+    const GridPoint pv = tin_.points[v];
+    const bool v_counts = before == 0 && grid_.is_valid(pv.x, pv.y);
+    const double zv = grid_.at(pv.x, pv.y);
+    if (v_counts) {
+        double lo = grid_.at(pts[0].x, pts[0].y), hi = lo;
+        for (const GridPoint& q : pts) {
+            lo = std::min(lo, static_cast<double>(grid_.at(q.x, q.y)));
+            hi = std::max(hi, static_cast<double>(grid_.at(q.x, q.y)));
+        }
+        if (zv - hi > eps_ || lo - zv > eps_) {
+            return false;
+        }
+    }
+    // Whether a candidate triangle honours v, if it covers v: an O(1) test before any scan.
+    const auto honours_v = [&](int i, int j, int k, bool& covers) {
+        const GridPoint a = pts[static_cast<std::size_t>(i)];
+        const GridPoint b = pts[static_cast<std::size_t>(j)];
+        const GridPoint c = pts[static_cast<std::size_t>(k)];
+        const std::int64_t wa = orient2d(b, c, pv), wb = orient2d(c, a, pv),
+                           wc = orient2d(a, b, pv);
+        covers = wa >= 0 && wb >= 0 && wc >= 0 && orient2d(a, b, c) > 0;
+        if (!covers) {
+            return true;
+        }
+        const double z = interpolate(a,
+                                     grid_.at(a.x, a.y),
+                                     b,
+                                     grid_.at(b.x, b.y),
+                                     c,
+                                     grid_.at(c.x, c.y),
+                                     wa,
+                                     wb,
+                                     wc,
+                                     inverse_area(a, b, c),
+                                     pv);
+        return std::abs(z - zv) <= eps_;
+    };
+    // The dynamic program runs on estimates: each candidate triangle is scanned on a coarse
+    // lattice of samples (every kStride-th row and column; small triangles in full). Error
+    // points seen there are real, so such triangles are out. The winning triangulation is then
+    // scanned in full; a triangle that fails is ruled out and the program runs again. Only
+    // exact full scans ever decide a removal.
+    const auto key = [n](int i, int j, int k) {
+        return (static_cast<std::size_t>(i) * n + static_cast<std::size_t>(j)) * n +
+               static_cast<std::size_t>(k);
+    };
+    enum : std::uint8_t { kUnknown, kEstimated, kExact, kRuledOut };
+    auto& state = scratch_.state;
+    state.assign(n * n * n, kUnknown);
+    auto& estimate = scratch_.estimate;
+    estimate.resize(n * n * n);
+    auto& exact = scratch_.exact;
+    exact.clear();
+    const auto cost = [&](int i, int j, int k) -> std::optional<TriangleCost> {
+        const std::size_t id = key(i, j, k);
+        if (state[id] == kRuledOut) {
+            return std::nullopt;
+        }
+        if (state[id] != kUnknown) {
+            return estimate[id];
+        }
+        bool covers = false;
+        if (v_counts && !honours_v(i, j, k, covers)) {
+            state[id] = kRuledOut;
+            return std::nullopt;
+        }
+        const Index a = poly[static_cast<std::size_t>(i)], b = poly[static_cast<std::size_t>(j)],
+                    c = poly[static_cast<std::size_t>(k)];
+        const std::int64_t area = orient2d(tin_.points[a], tin_.points[b], tin_.points[c]);
+        const int stride = area < kSmallTriangle ? 1 : kStride;
+        const TriangleStats st = scan_triangle(
+            grid_, eps_, tin_.points[a], tin_.points[b], tin_.points[c], before + 1, stride);
+        if (st.error_points > before) {
+            state[id] = kRuledOut;
+            return std::nullopt;
+        }
+        state[id] = stride == 1 ? kExact : kEstimated;
+        estimate[id] = TriangleCost{st.error_points, st.total_error * stride * stride};
+        if (stride == 1) {
+            exact.push_back({id, st});
+        }
+        return estimate[id];
+    };
+    // Every re-triangulation has a triangle covering v. Those candidates are tried first, so
+    // that a removal that cannot work usually fails after a few scans instead of all of them.
+    if (v_counts) {
+        auto& side = scratch_.side;
+        side.assign(n * n, -1);
+        const auto side_ok = [&](int i, int k) {
+            std::int8_t& known =
+                side[static_cast<std::size_t>(i) * n + static_cast<std::size_t>(k)];
+            if (known < 0) {
+                const bool edge = k == i + 1 || (i == 0 && k == static_cast<int>(n) - 1);
+                known = edge || valid_diagonal_star(pts, pv, i, k) ? 1 : 0;
+            }
+            return known == 1;
+        };
+        bool any = false;
+        for (int i = 0; i < static_cast<int>(n) && !any; ++i) {
+            for (int j = i + 1; j < static_cast<int>(n) && !any; ++j) {
+                for (int k = j + 1; k < static_cast<int>(n) && !any; ++k) {
+                    bool covers = false;
+                    if (honours_v(i, j, k, covers) && covers && side_ok(i, j) && side_ok(j, k) &&
+                        side_ok(i, k)) {
+                        any = cost(i, j, k).has_value();
+                    }
+                }
+            }
+        }
+        if (!any) {
+            return false;
+        }
+    }
+    std::optional<std::vector<std::array<int, 3>>> tris;
+    for (int attempt = 0;; ++attempt) {
+        if (attempt == kMaxAttempts) {
+            return false;
+        }
+        tris = triangulate_polygon(pts, std::ref(cost), nullptr, &scratch_.dp, &pv);
+        if (!tris) {
+            return false;
+        }
+        bool verified = true;
+        std::int64_t total = 0;
+        for (const auto& [i, j, k] : *tris) {
+            const std::size_t id = key(i, j, k);
+            if (state[id] == kEstimated) {
+                const TriangleStats st = scan(poly[static_cast<std::size_t>(i)],
+                                              poly[static_cast<std::size_t>(j)],
+                                              poly[static_cast<std::size_t>(k)],
+                                              before + 1);
+                if (st.error_points > before) {
+                    state[id] = kRuledOut;
+                    verified = false;
+                    continue;
+                }
+                state[id] = kExact;
+                exact.push_back({id, st});
+            }
+            const auto it = std::find_if(
+                exact.begin(), exact.end(), [&](const auto& m) { return m.first == id; });
+            total += it->second.error_points;
+        }
+        if (!verified) {
+            continue;
+        }
+        if (total > before) {
+            return false;
+        }
+        break;
+    }
+    // Outer twins of the hole's edges: poly[k] -> poly[k + 1] is the far edge of ring[k].
+    std::vector<Index> outer(n, kNone);
+    for (std::size_t k = 0; k < ring.size(); ++k) {
+        outer[k] = tin_.halfedges[next_edge(ring[k])];
+    }
+    for (Index e : ring) {
+        release(e / 3);
+    }
+    tin_.vertex_edge[v] = kNone;
+    std::vector<Index> made;
+    for (const auto& [i, j, k] : *tris) {
+        const Index t = tin_.add_triangle(poly[static_cast<std::size_t>(i)],
+                                          poly[static_cast<std::size_t>(j)],
+                                          poly[static_cast<std::size_t>(k)]);
+        made.push_back(t);
+        const std::array<int, 3> corner{i, j, k};
+        for (int s = 0; s < 3; ++s) {
+            const int from = corner[static_cast<std::size_t>(s)];
+            const int to = corner[static_cast<std::size_t>((s + 1) % 3)];
+            const Index e = 3 * t + static_cast<Index>(s);
+            if ((from + 1) % static_cast<int>(n) == to) {
+                tin_.link(e, outer[static_cast<std::size_t>(from)]);
+            }
+        }
+        const std::size_t id = key(i, j, k);
+        const auto it =
+            std::find_if(exact.begin(), exact.end(), [&](const auto& m) { return m.first == id; });
+        TB_ASSERT(it != exact.end());
+        set_stats(t, it->second);
+    }
+    // Link the diagonals between the new triangles.
+    for (Index t : made) {
+        for (Index e = 3 * t; e < 3 * t + 3; ++e) {
+            const Index a = tin_.triangles[e], b = tin_.triangles[next_edge(e)];
+            for (Index u : made) {
+                for (Index f = 3 * u; f < 3 * u + 3; ++f) {
+                    if (tin_.triangles[f] == b && tin_.triangles[next_edge(f)] == a) {
+                        tin_.link(e, f);
+                    }
+                }
+            }
+        }
+    }
+    return true;
+}
+
+std::size_t Refiner::merge_pass() {
+    // Flatness of a vertex's neighbourhood: the largest deviation 1 - cos of an incident
+    // triangle's normal from their area-weighted mean normal. When most vertices are to be
+    // tried it is accumulated over the triangles in slot order (sequential memory, where
+    // walking each ring would jump around); when few are, over their rings.
+    const std::size_t nv = tin_.points.size();
+    dirty_.resize(nv, 1);
+    const auto eligible = [&](Index v) {
+        const GridPoint p = tin_.points[v];
+        const bool border =
+            p.x == 0 || p.y == 0 || p.x == grid_.width - 1 || p.y == grid_.height - 1;
+        return tin_.vertex_edge[v] != kNone && dirty_[v] != 0 && !(lock_border_ && border);
+    };
+    std::vector<Index> todo;
+    for (Index v = 0; v < nv; ++v) {
+        if (eligible(v)) {
+            todo.push_back(v);
+        }
+    }
+    const bool sweep = todo.size() * 8 > nv;
+    std::vector<std::array<double, 3>> mean(sweep ? nv : 0, {0.0, 0.0, 0.0});
+    std::vector<double> deviation(nv, 0.0);
+    std::vector<std::int64_t> error_points(nv, 0);
+    const auto normal = [&](Index t) {
+        // In (x, y, z) with z the heights, of length twice the 3-D area.
+        std::array<double, 3> p[3];
+        for (Index k = 0; k < 3; ++k) {
+            const GridPoint g = tin_.points[tin_.triangles[3 * t + k]];
+            p[k] = {static_cast<double>(g.x),
+                    static_cast<double>(g.y),
+                    static_cast<double>(grid_.at(g.x, g.y))};
+        }
+        const double ux = p[1][0] - p[0][0], uy = p[1][1] - p[0][1], uz = p[1][2] - p[0][2];
+        const double wx = p[2][0] - p[0][0], wy = p[2][1] - p[0][1], wz = p[2][2] - p[0][2];
+        return std::array<double, 3>{uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx};
+    };
+    const auto deviation_of = [](const std::array<double, 3>& nrm, const std::array<double, 3>& m) {
+        const double len = std::sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2]);
+        const double mean_len = std::sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]);
+        return 1.0 - (nrm[0] * m[0] + nrm[1] * m[1] + nrm[2] * m[2]) / (len * mean_len);
+    };
+    std::vector<Index> ring;
+    if (sweep) {
+        for (Index t = 0; t < tin_.triangle_slots(); ++t) {
+            if (!tin_.alive(t)) {
+                continue;
+            }
+            const auto nrm = normal(t);
+            for (Index e = 3 * t; e < 3 * t + 3; ++e) {
+                const Index v = tin_.triangles[e];
+                for (std::size_t k = 0; k < 3; ++k) {
+                    mean[v][k] += nrm[k];
+                }
+                error_points[v] += stats_[t].error_points;
+            }
+        }
+        for (Index t = 0; t < tin_.triangle_slots(); ++t) {
+            if (!tin_.alive(t)) {
+                continue;
+            }
+            const auto nrm = normal(t);
+            for (Index e = 3 * t; e < 3 * t + 3; ++e) {
+                const Index v = tin_.triangles[e];
+                deviation[v] = std::max(deviation[v], deviation_of(nrm, mean[v]));
+            }
+        }
+    } else {
+        std::vector<std::array<double, 3>> normals;
+        for (Index v : todo) {
+            tin_.ring(v, ring);
+            normals.clear();
+            std::array<double, 3> m{0.0, 0.0, 0.0};
+            for (Index e : ring) {
+                normals.push_back(normal(e / 3));
+                for (std::size_t k = 0; k < 3; ++k) {
+                    m[k] += normals.back()[k];
+                }
+                error_points[v] += stats_[e / 3].error_points;
+            }
+            for (const auto& nrm : normals) {
+                deviation[v] = std::max(deviation[v], deviation_of(nrm, m));
+            }
+        }
+    }
+    // Vertices tried before and untouched since (dirty_ == 0) are left out: their removal
+    // would fail the same way.
+    std::vector<Candidate> order;
+    for (Index v : todo) {
+        order.push_back(
+            {flatness_class(deviation[v]), error_points[v], z_order(tin_.points[v]), v});
+    }
+    std::sort(order.begin(), order.end());
+    std::size_t removed = 0;
+    for (const Candidate& c : order) {
+        if (tin_.vertex_edge[c.v] == kNone || dirty_[c.v] == 0) {
+            continue;
+        }
+        dirty_[c.v] = 0;
+        if (try_remove(c.v, ring)) {
+            ++removed;
+        }
+    }
+    return removed;
+}
+
+} // namespace tb::core

@@ -1,0 +1,288 @@
+// Topology operations on the working triangulation (Lu & Yun §3.3 figure 4, §3.4 figure 5).
+#include "core/tin.hpp"
+
+#include <algorithm>
+
+#include "core/error.hpp"
+#include "core/predicates.hpp"
+
+namespace tb::core {
+
+Tin Tin::rectangle(int width, int height) {
+    Tin tin;
+    const std::int32_t x1 = width - 1;
+    const std::int32_t y1 = height - 1;
+    tin.points = {{0, 0}, {x1, 0}, {x1, y1}, {0, y1}};
+    tin.vertex_edge.assign(4, kNone);
+    const Index t0 = tin.add_triangle(0, 1, 2);
+    const Index t1 = tin.add_triangle(0, 2, 3);
+    tin.link(3 * t0 + 2, 3 * t1); // 2 -> 0 and 0 -> 2
+    return tin;
+}
+
+Index Tin::add_point(GridPoint p) {
+    points.push_back(p);
+    vertex_edge.push_back(kNone);
+    return static_cast<Index>(points.size() - 1);
+}
+
+Index Tin::add_triangle(Index a, Index b, Index c) {
+    Index t;
+    if (!free_triangles.empty()) {
+        t = free_triangles.back();
+        free_triangles.pop_back();
+    } else {
+        t = static_cast<Index>(triangle_slots());
+        triangles.resize(triangles.size() + 3);
+        halfedges.resize(halfedges.size() + 3);
+    }
+    triangles[3 * t] = a;
+    triangles[3 * t + 1] = b;
+    triangles[3 * t + 2] = c;
+    halfedges[3 * t] = halfedges[3 * t + 1] = halfedges[3 * t + 2] = kNone;
+    TB_ASSERT(orient2d(points[a], points[b], points[c]) > 0);
+    touch(t);
+    return t;
+}
+
+void Tin::free_triangle(Index t) {
+    for (Index e = 3 * t; e < 3 * t + 3; ++e) {
+        triangles[e] = kNone;
+        halfedges[e] = kNone;
+    }
+    free_triangles.push_back(t);
+}
+
+void Tin::split_triangle(Index t, Index p, std::array<Index, 4>& out) {
+    const Index a = triangles[3 * t], b = triangles[3 * t + 1], c = triangles[3 * t + 2];
+    const Index ab = halfedges[3 * t], bc = halfedges[3 * t + 1], ca = halfedges[3 * t + 2];
+    // t -> (a, b, p); t1 = (b, c, p); t2 = (c, a, p)
+    triangles[3 * t + 2] = p;
+    TB_ASSERT(orient2d(points[a], points[b], points[p]) > 0);
+    const Index t1 = add_triangle(b, c, p);
+    const Index t2 = add_triangle(c, a, p);
+    link(3 * t, ab);
+    link(3 * t1, bc);
+    link(3 * t2, ca);
+    link(3 * t + 1, 3 * t1 + 2);  // b -> p | p -> b
+    link(3 * t1 + 1, 3 * t2 + 2); // c -> p | p -> c
+    link(3 * t2 + 1, 3 * t + 2);  // a -> p | p -> a
+    touch(t);
+    out = {t, t1, t2, kNone};
+}
+
+int Tin::split_edge(Index e, Index p, std::array<Index, 4>& out) {
+    //        c                 c
+    //      /   \             / | \      .
+    //     a --e-> b   ->    a--p--b
+    //      \ <-f /           \ | /
+    //        d                 d
+    const Index f = halfedges[e];
+    const Index t = e / 3;
+    const Index a = triangles[e], b = triangles[next_edge(e)], c = triangles[prev_edge(e)];
+    const Index bc = halfedges[next_edge(e)], ca = halfedges[prev_edge(e)];
+    // t -> (a, p, c); t1 = (p, b, c)
+    triangles[3 * t] = a;
+    triangles[3 * t + 1] = p;
+    triangles[3 * t + 2] = c;
+    TB_ASSERT(orient2d(points[a], points[p], points[c]) > 0);
+    const Index t1 = add_triangle(p, b, c);
+    link(3 * t + 2, ca);
+    link(3 * t1 + 1, bc);
+    link(3 * t + 1, 3 * t1 + 2); // p -> c | c -> p
+    touch(t);
+    if (f == kNone) {
+        halfedges[3 * t] = kNone;
+        halfedges[3 * t1] = kNone;
+        out = {t, t1, kNone, kNone};
+        return 2;
+    }
+    const Index u = f / 3;
+    const Index d = triangles[prev_edge(f)];
+    const Index ad = halfedges[next_edge(f)], db = halfedges[prev_edge(f)];
+    // u -> (b, p, d); u1 = (p, a, d)
+    triangles[3 * u] = b;
+    triangles[3 * u + 1] = p;
+    triangles[3 * u + 2] = d;
+    TB_ASSERT(orient2d(points[b], points[p], points[d]) > 0);
+    const Index u1 = add_triangle(p, a, d);
+    link(3 * u + 2, db);
+    link(3 * u1 + 1, ad);
+    link(3 * u + 1, 3 * u1 + 2); // p -> d | d -> p
+    link(3 * t, 3 * u1);         // a -> p | p -> a
+    link(3 * t1, 3 * u);         // p -> b | b -> p
+    touch(u);
+    out = {t, t1, u, u1};
+    return 4;
+}
+
+Index Tin::flip(Index e) {
+    //        r                 r
+    //      /   \             / | \      .
+    //     p --e-> q   ->    p  |  q
+    //      \ <-f /           \ | /
+    //        s                 s
+    const Index f = halfedges[e];
+    TB_ASSERT(f != kNone);
+    const Index t = e / 3, u = f / 3;
+    const Index p = triangles[e], q = triangles[next_edge(e)], r = triangles[prev_edge(e)];
+    const Index s = triangles[prev_edge(f)];
+    const Index qr = halfedges[next_edge(e)], rp = halfedges[prev_edge(e)];
+    const Index ps = halfedges[next_edge(f)], sq = halfedges[prev_edge(f)];
+    TB_ASSERT(orient2d(points[r], points[p], points[s]) > 0);
+    TB_ASSERT(orient2d(points[s], points[q], points[r]) > 0);
+    // t -> (r, p, s), u -> (s, q, r)
+    triangles[3 * t] = r;
+    triangles[3 * t + 1] = p;
+    triangles[3 * t + 2] = s;
+    triangles[3 * u] = s;
+    triangles[3 * u + 1] = q;
+    triangles[3 * u + 2] = r;
+    link(3 * t, rp);
+    link(3 * t + 1, ps);
+    link(3 * u, sq);
+    link(3 * u + 1, qr);
+    link(3 * t + 2, 3 * u + 2); // s -> r | r -> s
+    touch(t);
+    touch(u);
+    return 3 * t + 2;
+}
+
+void Tin::ring(Index v, std::vector<Index>& out) const {
+    out.clear();
+    const Index e0 = vertex_edge[v];
+    TB_ASSERT(e0 != kNone);
+    // Counter-clockwise from e0; an interior vertex comes back to e0.
+    Index e = e0;
+    do {
+        out.push_back(e);
+        e = halfedges[prev_edge(e)];
+    } while (e != kNone && e != e0);
+    if (e == e0) {
+        return;
+    }
+    // A border vertex: restart from the border edge leaving v (rotate clockwise to it).
+    Index first = e0;
+    while (halfedges[first] != kNone) {
+        first = next_edge(halfedges[first]);
+    }
+    out.clear();
+    for (e = first; e != kNone; e = halfedges[prev_edge(e)]) {
+        out.push_back(e);
+    }
+}
+
+bool Tin::on_border(Index v) const {
+    std::vector<Index> r;
+    ring(v, r);
+    return halfedges[r.front()] == kNone;
+}
+
+namespace {
+
+std::uint64_t z_order_key(GridPoint p) {
+    std::uint64_t out = 0;
+    for (int b = 0; b < 21; ++b) {
+        out |= ((static_cast<std::uint64_t>(p.x) >> b) & 1u) << (2 * b);
+        out |= ((static_cast<std::uint64_t>(p.y) >> b) & 1u) << (2 * b + 1);
+    }
+    return out;
+}
+
+} // namespace
+
+std::vector<Index> Tin::compact() {
+    // Vertices by the Z-order of their position (unique, so the order is total).
+    std::vector<std::pair<std::uint64_t, Index>> keys;
+    for (Index v = 0; v < points.size(); ++v) {
+        if (vertex_edge[v] != kNone) {
+            keys.push_back({z_order_key(points[v]), v});
+        }
+    }
+    std::sort(keys.begin(), keys.end());
+    std::vector<Index> vmap(points.size(), kNone);
+    std::vector<GridPoint> new_points(keys.size());
+    for (Index i = 0; i < keys.size(); ++i) {
+        vmap[keys[i].second] = i;
+        new_points[i] = points[keys[i].second];
+    }
+    // Triangles by their lowest new vertex (a counting sort; ties keep slot order).
+    std::vector<Index> first(points.size() + 1, 0);
+    std::vector<Index> lowest(triangle_slots(), kNone);
+    for (Index t = 0; t < triangle_slots(); ++t) {
+        if (alive(t)) {
+            lowest[t] = std::min(
+                {vmap[triangles[3 * t]], vmap[triangles[3 * t + 1]], vmap[triangles[3 * t + 2]]});
+            ++first[lowest[t] + 1];
+        }
+    }
+    for (std::size_t v = 1; v < first.size(); ++v) {
+        first[v] += first[v - 1];
+    }
+    std::vector<Index> tmap(triangle_slots(), kNone);
+    std::vector<Index> old_of(first.back());
+    for (Index t = 0; t < triangle_slots(); ++t) {
+        if (lowest[t] != kNone) {
+            const Index i = first[lowest[t]]++;
+            tmap[t] = i;
+            old_of[i] = t;
+        }
+    }
+    std::vector<Index> new_triangles(3 * old_of.size());
+    std::vector<Index> new_halfedges(3 * old_of.size());
+    for (Index i = 0; i < old_of.size(); ++i) {
+        const Index t = old_of[i];
+        for (Index k = 0; k < 3; ++k) {
+            new_triangles[3 * i + k] = vmap[triangles[3 * t + k]];
+            const Index twin = halfedges[3 * t + k];
+            new_halfedges[3 * i + k] = twin == kNone ? kNone : 3 * tmap[twin / 3] + twin % 3;
+        }
+    }
+    points = std::move(new_points);
+    triangles = std::move(new_triangles);
+    halfedges = std::move(new_halfedges);
+    free_triangles.clear();
+    vertex_edge.assign(points.size(), kNone);
+    for (Index e = 0; e < triangles.size(); ++e) {
+        if (vertex_edge[triangles[e]] == kNone) {
+            vertex_edge[triangles[e]] = e;
+        }
+    }
+    return old_of;
+}
+
+Mesh Tin::to_mesh(const std::vector<float>& heights, int width) const {
+    Mesh mesh;
+    std::vector<Index> vmap(points.size(), kNone);
+    std::vector<Index> tmap(triangle_slots(), kNone);
+    Index nt = 0;
+    for (Index t = 0; t < triangle_slots(); ++t) {
+        if (alive(t)) {
+            tmap[t] = nt++;
+        }
+    }
+    mesh.triangles.resize(3 * std::size_t{nt});
+    mesh.halfedges.resize(3 * std::size_t{nt});
+    for (Index t = 0; t < triangle_slots(); ++t) {
+        if (!alive(t)) {
+            continue;
+        }
+        for (Index k = 0; k < 3; ++k) {
+            const Index e = 3 * t + k;
+            const Index v = triangles[e];
+            if (vmap[v] == kNone) {
+                vmap[v] = static_cast<Index>(mesh.points.size());
+                mesh.points.push_back(points[v]);
+                mesh.z.push_back(
+                    heights[static_cast<std::size_t>(points[v].y) * width + points[v].x]);
+            }
+            const Index out = 3 * tmap[t] + k;
+            mesh.triangles[out] = vmap[v];
+            const Index twin = halfedges[e];
+            mesh.halfedges[out] = twin == kNone ? kNone : 3 * tmap[twin / 3] + twin % 3;
+        }
+    }
+    return mesh;
+}
+
+} // namespace tb::core
