@@ -12,10 +12,15 @@ RUN scripts/setup.sh && make test && make build
 FROM debian:12-slim AS runtime
 COPY scripts/setup.sh /tmp/setup.sh
 RUN /tmp/setup.sh --runtime && rm -rf /var/lib/apt/lists/* /tmp/setup.sh \
-    && useradd --system --home /var/lib/terrabound --create-home terrabound
+    && useradd --system --home /var/lib/terrabound --create-home terrabound \
+    && mkdir -p /var/lib/terrabound/data && chown terrabound /var/lib/terrabound
 COPY --from=build /src/build/terrabound /usr/local/bin/terrabound
 COPY --from=build /src/config /etc/terrabound
 COPY --from=build /src/data/N57E011.hgt /var/lib/terrabound/data/N57E011.hgt
+# The viewer at /: its page and the two npm packages it loads (found beside the binary).
+COPY --from=build /src/web/index.html /src/web/viewer.js /src/web/viewer.css /usr/local/share/terrabound/web/
+COPY --from=build /src/web/node_modules/cesium/Build /usr/local/share/terrabound/web/node_modules/cesium/Build
+COPY --from=build /src/web/node_modules/three /usr/local/share/terrabound/web/node_modules/three
 USER terrabound
 WORKDIR /var/lib/terrabound
 EXPOSE 8080
