@@ -5,7 +5,7 @@
 #   bench/mesh_bench.sh [--reps N] [--quick]
 #
 # Builds bench/mesh_bench in Release into build-bench (-DTB_BUILD_BENCH=ON), copies
-# /work/shared/bench (read-only) to bench/runs/peer (git-ignored), installs delatin there with
+# ../shared/bench (read-only) to bench/runs/peer (git-ignored), installs delatin there with
 # npm, prepares the heightmaps with its tools, then for every case prints one TSV line:
 #   input size eps ms triangles achieved_max_err peer_triangles ratio peer_ms speed_ratio linf_check
 # ratio = our triangles / delatin's; speed_ratio = our samples/s / delatin's (same grid, so
