@@ -178,7 +178,7 @@ int run(const Args& args) {
     return 0;
 }
 
-}  // namespace
+} // namespace
 
 const Command& build_command() {
     static const Command command{
@@ -198,8 +198,10 @@ const Command& build_command() {
              {"threads", "N", "worker threads (default: one per core)"},
              {"resume", "", "continue a build: same parameters, tiles already there are kept"},
              {"force", "", "delete the layer's existing tiles and documents first"},
-             {"shard", "I/N", "build shard I of N (0-based; auto/N reads JOB_COMPLETION_INDEX "
-                              "or SLURM_ARRAY_TASK_ID); implies --resume"},
+             {"shard",
+              "I/N",
+              "build shard I of N (0-based; auto/N reads JOB_COMPLETION_INDEX "
+              "or SLURM_ARRAY_TASK_ID); implies --resume"},
              {"finalize", "", "after all shards: check they finished, then write the tileset"},
              {"json", "", "also print the summary as one JSON line on stdout"},
          },
@@ -213,4 +215,4 @@ const Command& build_command() {
     return command;
 }
 
-}  // namespace tb::cli
+} // namespace tb::cli

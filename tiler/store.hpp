@@ -1,13 +1,20 @@
 #pragma once
 // Tile stores: where encoded tiles live once made. Two stores behind one interface:
-//   directory: OUT/{layer}/{z}/{x}/{y}.{ext} and OUT/{layer}/tileset.json (static hosting);
-//   SQLite:    one file (*.sqlite), WAL, tiles keyed by (layer, format, eps level, z, x, y).
-// Every write is atomic: a reader never sees a truncated tile.
+//   directory: OUT/{layer}/{z}/{x}/{y}.{ext}, eps variants under
+//   OUT/{layer}/eps{k}/{z}/{x}/{y}.{ext},
+//              documents at OUT/{layer}/{name} (name may hold '/': "subtrees/0/0/0.subtree");
+//   SQLite:    one file (*.sqlite or *.db), WAL, tables tiles(layer, format, eps_level, z, x, y,
+//              data), documents(layer, name, data) and meta(name, value).
+// Every write is atomic: a reader never sees a truncated tile or document. The directory store
+// writes a temporary file next to the target, fsyncs it and renames it over the target; the
+// SQLite store commits each put (or each put_batch) as one transaction.
+// Both stores are safe to use from many threads at once.
 #include "tiler/format.hpp"
 #include "tiler/tile_grid.hpp"
 
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <string_view>
 
@@ -17,7 +24,12 @@ struct TileKey {
     std::string layer;
     TileId id;
     Format format = Format::Glb;
-    int eps_level = -1;  // as EpsChoice::level
+    int eps_level = -1; // as EpsChoice::level
+};
+
+struct StoredTile {
+    TileKey key;
+    std::string bytes;
 };
 
 class TileStore {
@@ -28,18 +40,40 @@ public:
     // directory store. Throws IoError naming the path when it cannot be opened or created.
     static std::unique_ptr<TileStore> open(const std::string& path);
 
+    // Keys and document names are validated first (validate_key, validate_document_name):
+    // InputError for a bad one. Read and write failures throw IoError naming the path.
     virtual std::optional<std::string> get(const TileKey& key) const = 0;
     virtual bool contains(const TileKey& key) const = 0;
     virtual void put(const TileKey& key, std::string_view bytes) = 0;
+    // Writes many tiles; each one is atomic, and the SQLite store commits them in one
+    // transaction (all or none), which is what makes bulk building fast.
+    virtual void put_batch(std::span<const StoredTile> tiles);
 
     // Per-layer documents (tileset.json, build manifest, ...), keyed by file name.
     virtual std::optional<std::string> get_document(const std::string& layer,
                                                     const std::string& name) const = 0;
-    virtual void put_document(const std::string& layer,
-                              const std::string& name,
-                              std::string_view bytes) = 0;
+    virtual void
+    put_document(const std::string& layer, const std::string& name, std::string_view bytes) = 0;
 
-    virtual std::string describe() const = 0;  // "directory OUT" / "sqlite OUT.sqlite"
+    // True when the store holds any tile or document of `layer`.
+    virtual bool has_layer(const std::string& layer) const = 0;
+    // Deletes every tile and document of `layer` (the builder's --force).
+    virtual void remove_layer(const std::string& layer) = 0;
+    // Removes what interrupted writers may leave behind (the directory store's temporary files
+    // after a crash). Call only while no other process writes the layer.
+    virtual void clean_up(const std::string& layer) = 0;
+
+    virtual std::string describe() const = 0; // "directory OUT" / "sqlite OUT.sqlite"
 };
 
-}  // namespace tb::tiler
+// Layer names are URL-safe: [A-Za-z0-9_-]+, at most 64 characters. InputError otherwise.
+void validate_layer_name(const std::string& layer);
+// A document name is a relative path of '/'-separated parts made of printable ASCII, with no
+// empty part, no part starting with '.' (so no "..", "." or hidden file), no backslash and no
+// NUL, at most 512 bytes, so that nothing escapes the layer. InputError otherwise.
+void validate_document_name(const std::string& name);
+// The layer name plus a tile inside the scheme-independent bounds (0 <= z <= kMaxZoom,
+// 0 <= x, y < 2^(z+1)) and eps_level >= -1. InputError otherwise.
+void validate_key(const TileKey& key);
+
+} // namespace tb::tiler

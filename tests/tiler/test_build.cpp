@@ -1,0 +1,559 @@
+// terrabound build, end to end: the real binary (TB_BINARY) on a generated GeoTIFF and on a
+// real DEM, into both stores; kill and resume, shards, thread counts, bad input.
+#include "core/error.hpp"
+#include "tiler/build.hpp"
+#include "tiler/draco_decode.hpp"
+#include "tiler/store.hpp"
+
+#include <doctest/doctest.h>
+#include <gdal_priv.h>
+#include <ogr_spatialref.h>
+#include <sqlite3.h>
+
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <cstdlib>
+#include <fcntl.h>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <optional>
+#include <spawn.h>
+#include <sstream>
+#include <string>
+#include <sys/mount.h>
+#include <sys/wait.h>
+#include <thread>
+#include <unistd.h>
+#include <vector>
+
+extern char** environ;
+
+namespace fs = std::filesystem;
+using namespace tb::tiler;
+
+namespace {
+
+struct BuildDir {
+    fs::path path;
+    BuildDir() {
+        std::string tmpl = (fs::temp_directory_path() / "tb-build-XXXXXX").string();
+        REQUIRE(::mkdtemp(tmpl.data()) != nullptr);
+        path = tmpl;
+    }
+    ~BuildDir() {
+        std::error_code ec;
+        fs::remove_all(path, ec);
+    }
+    std::string operator/(const std::string& name) const { return (path / name).string(); }
+};
+
+std::string slurp(const fs::path& p) {
+    std::ifstream in(p, std::ios::binary);
+    std::ostringstream s;
+    s << in.rdbuf();
+    return s.str();
+}
+
+// 129 x 129 Float32 samples over 0.5 x 0.5 degrees near the Alps: two hills, a ridge, and a
+// nodata block in the south-west corner.
+std::string write_dem(const std::string& path) {
+    GDALAllRegister();
+    GDALDriver* driver = GetGDALDriverManager()->GetDriverByName("GTiff");
+    REQUIRE(driver != nullptr);
+    constexpr int n = 129;
+    GDALDatasetUniquePtr ds(driver->Create(path.c_str(), n, n, 1, GDT_Float32, nullptr));
+    REQUIRE(ds != nullptr);
+    double gt[6] = {7.25, 0.5 / (n - 1), 0, 46.75, 0, -0.5 / (n - 1)};
+    ds->SetGeoTransform(gt);
+    OGRSpatialReference srs;
+    srs.importFromEPSG(4326);
+    ds->SetSpatialRef(&srs);
+    std::vector<float> v(static_cast<std::size_t>(n) * n);
+    for (int r = 0; r < n; ++r) {
+        for (int c = 0; c < n; ++c) {
+            const double x = c / double(n - 1), y = r / double(n - 1);
+            double h = 800 + 600 * std::exp(-((x - 0.3) * (x - 0.3) + (y - 0.4) * (y - 0.4)) * 20) +
+                       400 * std::exp(-((x - 0.7) * (x - 0.7) + (y - 0.7) * (y - 0.7)) * 30) +
+                       150 * std::sin(9 * x + 4 * y);
+            if (c < 20 && r > n - 25) {
+                h = -9999;
+            }
+            v[static_cast<std::size_t>(r) * n + c] = static_cast<float>(h);
+        }
+    }
+    GDALRasterBand* band = ds->GetRasterBand(1);
+    band->SetNoDataValue(-9999);
+    REQUIRE(band->RasterIO(GF_Write, 0, 0, n, n, v.data(), n, n, GDT_Float32, 0, 0) == CE_None);
+    return path;
+}
+
+struct Run {
+    int code = -1;
+    std::string out, err;
+};
+
+// Starts TB_BINARY with `args`; stdout/stderr go to files in `dir`. Returns the pid.
+pid_t spawn(const std::vector<std::string>& args, const fs::path& dir) {
+    std::vector<std::string> words{TB_BINARY};
+    words.insert(words.end(), args.begin(), args.end());
+    std::vector<char*> argv;
+    for (auto& w : words) {
+        argv.push_back(w.data());
+    }
+    argv.push_back(nullptr);
+    posix_spawn_file_actions_t fa;
+    posix_spawn_file_actions_init(&fa);
+    posix_spawn_file_actions_addopen(
+        &fa, 1, (dir / "stdout.txt").c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    posix_spawn_file_actions_addopen(
+        &fa, 2, (dir / "stderr.txt").c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    pid_t pid = -1;
+    const int rc = posix_spawn(&pid, argv[0], &fa, nullptr, argv.data(), environ);
+    posix_spawn_file_actions_destroy(&fa);
+    REQUIRE(rc == 0);
+    return pid;
+}
+
+Run wait_for(pid_t pid, const fs::path& dir) {
+    int status = 0;
+    REQUIRE(::waitpid(pid, &status, 0) == pid);
+    Run r;
+    r.code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+    r.out = slurp(dir / "stdout.txt");
+    r.err = slurp(dir / "stderr.txt");
+    return r;
+}
+
+Run run(const std::vector<std::string>& args, const BuildDir& dir) {
+    return wait_for(spawn(args, dir.path), dir.path);
+}
+
+// Every file under `root` (relative path -> bytes).
+std::map<std::string, std::string> tree(const fs::path& root) {
+    std::map<std::string, std::string> files;
+    for (const auto& e : fs::recursive_directory_iterator(root)) {
+        if (e.is_regular_file()) {
+            files[fs::relative(e.path(), root).string()] = slurp(e.path());
+        }
+    }
+    return files;
+}
+
+std::size_t count_tiles(const fs::path& layer_dir) {
+    std::size_t n = 0;
+    std::error_code ec;
+    for (auto it = fs::recursive_directory_iterator(layer_dir, ec);
+         !ec && it != fs::recursive_directory_iterator();
+         it.increment(ec)) {
+        const auto ext = it->path().extension();
+        n += (ext == ".glb" || ext == ".drc") ? 1 : 0;
+    }
+    return n;
+}
+
+// Tiles of an SQLite store: "layer/fmt/eps/z/x/y" -> bytes.
+std::map<std::string, std::string> sqlite_tiles(const std::string& path) {
+    std::map<std::string, std::string> tiles;
+    sqlite3* db = nullptr;
+    REQUIRE(sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READONLY, nullptr) == SQLITE_OK);
+    sqlite3_stmt* s = nullptr;
+    REQUIRE(sqlite3_prepare_v2(
+                db, "SELECT layer, format, eps_level, z, x, y, data FROM tiles", -1, &s, nullptr) ==
+            SQLITE_OK);
+    while (sqlite3_step(s) == SQLITE_ROW) {
+        std::string key;
+        for (int i = 0; i < 6; ++i) {
+            key += std::string(reinterpret_cast<const char*>(sqlite3_column_text(s, i))) + "/";
+        }
+        tiles[key] = std::string(static_cast<const char*>(sqlite3_column_blob(s, 6)),
+                                 static_cast<std::size_t>(sqlite3_column_bytes(s, 6)));
+    }
+    sqlite3_finalize(s);
+    sqlite3_close(db);
+    return tiles;
+}
+
+// The tile files of a directory build, in the SQLite store's key form.
+std::map<std::string, std::string> dir_tiles(const fs::path& out, const std::string& layer) {
+    std::map<std::string, std::string> tiles;
+    for (const auto& [rel, bytes] : tree(out / layer)) {
+        const fs::path p(rel);
+        const auto ext = p.extension().string();
+        if (ext != ".glb" && ext != ".drc") {
+            continue;
+        }
+        // z/x/y.ext
+        const std::string zxy = p.parent_path().string() + "/" + p.stem().string();
+        tiles[layer + "/" + ext.substr(1) + "/-1/" + zxy + "/"] = bytes;
+    }
+    return tiles;
+}
+
+// Follows the tileset's "uri"s; returns the tile paths (relative to the layer) it names.
+std::vector<std::string> tileset_tiles(const fs::path& layer_dir) {
+    std::vector<std::string> tiles;
+    std::vector<std::string> todo{"tileset.json"};
+    while (!todo.empty()) {
+        const std::string doc = todo.back();
+        todo.pop_back();
+        REQUIRE_MESSAGE(fs::exists(layer_dir / doc), doc);
+        const std::string json = slurp(layer_dir / doc);
+        const fs::path base = fs::path(doc).parent_path();
+        for (auto at = json.find("\"uri\":\""); at != std::string::npos;
+             at = json.find("\"uri\":\"", at + 1)) {
+            const auto q = json.find('"', at + 7);
+            const std::string target =
+                (base / json.substr(at + 7, q - at - 7)).lexically_normal().string();
+            if (target.ends_with(".json")) {
+                todo.push_back(target);
+            } else {
+                tiles.push_back(target);
+            }
+        }
+    }
+    return tiles;
+}
+
+const std::vector<std::string> kSmall = {"--size", "32", "--min-zoom", "7", "--max-zoom", "9"};
+
+std::vector<std::string>
+args(const std::string& dem, const std::string& out, std::vector<std::string> extra = {}) {
+    std::vector<std::string> a{"build", dem, "-o", out};
+    a.insert(a.end(), kSmall.begin(), kSmall.end());
+    a.insert(a.end(), extra.begin(), extra.end());
+    return a;
+}
+
+} // namespace
+
+TEST_CASE("shard parsing takes I/N 0-based and auto/N from the job index") {
+    CHECK(parse_shard("0/1").index == 0);
+    CHECK(parse_shard("3/8").count == 8);
+    CHECK_THROWS_AS(parse_shard("8/8"), tb::InputError);
+    CHECK_THROWS_AS(parse_shard("-1/8"), tb::InputError);
+    CHECK_THROWS_AS(parse_shard("1/0"), tb::InputError);
+    CHECK_THROWS_AS(parse_shard("1"), tb::InputError);
+    CHECK_THROWS_AS(parse_shard("a/2"), tb::InputError);
+    CHECK_THROWS_AS(parse_shard("1/2x"), tb::InputError);
+    ::setenv("JOB_COMPLETION_INDEX", "2", 1);
+    CHECK(parse_shard("auto/4").index == 2);
+    ::setenv("JOB_COMPLETION_INDEX", "4", 1);
+    CHECK_THROWS_AS(parse_shard("auto/4"), tb::InputError);
+    ::unsetenv("JOB_COMPLETION_INDEX");
+    ::setenv("SLURM_ARRAY_TASK_ID", "1", 1);
+    CHECK(parse_shard("auto/4").index == 1);
+    ::unsetenv("SLURM_ARRAY_TASK_ID");
+    CHECK_THROWS_AS(parse_shard("auto/4"), tb::InputError);
+    // Every shard gets a share of a zoom's tiles.
+    std::vector<int> per(4, 0);
+    for (std::int64_t x = 0; x < 16; ++x) {
+        for (std::int64_t y = 0; y < 16; ++y) {
+            ++per[static_cast<std::size_t>(shard_of(TileId{8, x, y}, 4))];
+        }
+    }
+    for (int n : per) {
+        CHECK(n > 30);
+    }
+}
+
+TEST_CASE("build writes every tile its tileset lists, each decodable, and the same bytes into "
+          "both stores whatever the thread count") {
+    BuildDir dir;
+    const auto dem = write_dem(dir / "dem.tif");
+    const Run a =
+        run(args(dem, dir / "out", {"--threads", "1", "--formats", "glb,drc", "--json"}), dir);
+    INFO(a.err);
+    REQUIRE(a.code == 0);
+    CHECK(a.out.find("\"failed\":0") != std::string::npos);
+    CHECK(a.out.find("\"tileset_written\":true") != std::string::npos);
+    CHECK(a.err.find("tiles written") != std::string::npos);
+
+    const fs::path layer = dir.path / "out/terrain";
+    const auto listed = tileset_tiles(layer);
+    REQUIRE(listed.size() > 5);
+    for (const auto& t : listed) {
+        CAPTURE(t);
+        REQUIRE(fs::exists(layer / t));
+        const DecodedTile d = decode_glb(slurp(layer / t));
+        CHECK(d.indices.size() >= 3);
+        const auto drc = (layer / t).replace_extension(".drc");
+        REQUIRE(fs::exists(drc));
+        CHECK(decode_drc(slurp(drc)).indices.size() >= 3);
+    }
+    // Nothing beyond what the tileset lists (plus the .drc twins) was written.
+    CHECK(count_tiles(layer) == 2 * listed.size());
+    CHECK(fs::exists(layer / "build-manifest.json"));
+
+    const Run b =
+        run(args(dem, dir / "out.sqlite", {"--threads", "2", "--formats", "glb,drc"}), dir);
+    INFO(b.err);
+    REQUIRE(b.code == 0);
+    const auto in_dir = dir_tiles(dir.path / "out", "terrain");
+    const auto in_db = sqlite_tiles(dir / "out.sqlite");
+    CHECK(in_dir.size() == 2 * listed.size());
+    CHECK(in_db.size() == in_dir.size());
+    CHECK((in_db == in_dir));
+    auto db = TileStore::open(dir / "out.sqlite");
+    CHECK(db->get_document("terrain", "tileset.json") == slurp(layer / "tileset.json"));
+}
+
+TEST_CASE("a build killed half way and resumed equals one clean run, byte for byte") {
+    BuildDir dir;
+    const auto dem = write_dem(dir / "dem.tif");
+    // Zoom 7..10: enough tiles to land a kill in the middle.
+    const std::vector<std::string> deep = {"--max-zoom", "11", "--threads", "1"};
+    REQUIRE(run(args(dem, dir / "clean", deep), dir).code == 0);
+    const auto clean = tree(dir.path / "clean");
+    const std::size_t total = count_tiles(dir.path / "clean/terrain");
+    REQUIRE(total > 20);
+
+    const pid_t pid = spawn(args(dem, dir / "killed", deep), dir.path);
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (count_tiles(dir.path / "killed/terrain") < total / 3 &&
+           std::chrono::steady_clock::now() < deadline) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    ::kill(pid, SIGKILL);
+    const Run killed = wait_for(pid, dir.path);
+    REQUIRE(killed.code == 128 + SIGKILL);
+    const std::size_t partial = count_tiles(dir.path / "killed/terrain");
+    CHECK(partial >= total / 3);
+    CHECK(partial < total);
+    CHECK_FALSE(fs::exists(dir.path / "killed/terrain/tileset.json"));
+
+    // Without --resume the existing output is refused.
+    const Run refused = run(args(dem, dir / "killed", deep), dir);
+    CHECK(refused.code == 2);
+    CHECK(refused.err.find("use --resume to continue or --force to overwrite") !=
+          std::string::npos);
+
+    const Run resumed =
+        run(args(dem, dir / "killed", {"--max-zoom", "11", "--resume", "--json"}), dir);
+    INFO(resumed.err);
+    REQUIRE(resumed.code == 0);
+    CHECK(resumed.out.find("\"skipped\":" + std::to_string(partial)) != std::string::npos);
+    CHECK((tree(dir.path / "killed") == clean));
+}
+
+TEST_CASE("SIGINT finishes the tiles in flight, exits non-zero, and --resume completes it") {
+    BuildDir dir;
+    const auto dem = write_dem(dir / "dem.tif");
+    // Zoom 7..12 at size 64: long enough (about a second) for the signal to land mid-build.
+    const std::vector<std::string> deep = {"--size", "64", "--max-zoom", "12", "--threads", "2"};
+    const pid_t pid = spawn(args(dem, dir / "out.sqlite", deep), dir.path);
+    // Wait until tiles are being made (the log says how many are planned first).
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (slurp(dir.path / "stderr.txt").find("thread(s), into") == std::string::npos &&
+           std::chrono::steady_clock::now() < deadline) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    ::kill(pid, SIGINT);
+    const Run stopped = wait_for(pid, dir.path);
+    INFO(stopped.err);
+    CHECK(stopped.code == 128 + SIGINT);
+    CHECK(stopped.err.find("interrupted; run again with --resume") != std::string::npos);
+    {
+        auto store = TileStore::open(dir / "out.sqlite");
+        CHECK_FALSE(store->get_document("terrain", "tileset.json").has_value());
+    }
+    const Run resumed =
+        run(args(dem, dir / "out.sqlite", {"--size", "64", "--max-zoom", "12", "--resume"}), dir);
+    INFO(resumed.err);
+    REQUIRE(resumed.code == 0);
+    REQUIRE(run(args(dem, dir / "clean.sqlite", deep), dir).code == 0);
+    CHECK((sqlite_tiles(dir / "out.sqlite") == sqlite_tiles(dir / "clean.sqlite")));
+}
+
+TEST_CASE("shards 0/2 and 1/2 then --finalize give the unsharded build") {
+    BuildDir dir;
+    const auto dem = write_dem(dir / "dem.tif");
+    REQUIRE(run(args(dem, dir / "whole"), dir).code == 0);
+
+    const Run s0 = run(args(dem, dir / "sharded", {"--shard", "0/2", "--json"}), dir);
+    INFO(s0.err);
+    REQUIRE(s0.code == 0);
+    CHECK(s0.out.find("\"tileset_written\":false") != std::string::npos);
+    CHECK_FALSE(fs::exists(dir.path / "sharded/terrain/tileset.json"));
+    // Finalizing before every shard reported is refused, naming the missing shard.
+    const Run early = run(args(dem, dir / "sharded", {"--finalize"}), dir);
+    CHECK(early.code == 2);
+    CHECK(early.err.find("shard 1/2 has not finished") != std::string::npos);
+    CHECK_FALSE(fs::exists(dir.path / "sharded/terrain/tileset.json"));
+
+    const Run s1 = run(args(dem, dir / "sharded", {"--shard", "1/2"}), dir);
+    INFO(s1.err);
+    REQUIRE(s1.code == 0);
+    // A shard count other than the first shards' is refused.
+    CHECK(run(args(dem, dir / "sharded", {"--shard", "1/3"}), dir).code == 2);
+    const Run fin = run(args(dem, dir / "sharded", {"--finalize"}), dir);
+    INFO(fin.err);
+    REQUIRE(fin.code == 0);
+
+    auto whole = tree(dir.path / "whole");
+    auto sharded = tree(dir.path / "sharded");
+    // Same tiles and tileset; the sharded build also has its shard reports, and a manifest
+    // that records the shard count.
+    CHECK(sharded.erase("terrain/build-shards/0-of-2.json") == 1);
+    CHECK(sharded.erase("terrain/build-shards/1-of-2.json") == 1);
+    CHECK(sharded.erase("terrain/build-manifest.json") == 1);
+    CHECK(whole.erase("terrain/build-manifest.json") == 1);
+    CHECK(whole.size() > 10);
+    CHECK((whole == sharded));
+}
+
+TEST_CASE("--resume with different parameters names the one that differs, and --force "
+          "starts over") {
+    BuildDir dir;
+    const auto dem = write_dem(dir / "dem.tif");
+    REQUIRE(run(args(dem, dir / "out", {"--max-zoom", "8"}), dir).code == 0);
+    const Run differs = run(args(dem, dir / "out", {"--max-zoom", "9", "--resume"}), dir);
+    CHECK(differs.code == 2);
+    CHECK(differs.err.find("max_zoom was 8, now 9") != std::string::npos);
+    const Run fmt =
+        run(args(dem, dir / "out", {"--max-zoom", "8", "--resume", "--formats", "drc"}), dir);
+    CHECK(fmt.code == 2);
+    CHECK(fmt.err.find("formats was [\"glb\"]") != std::string::npos);
+    // A finished build resumed again skips everything and changes nothing.
+    const auto before = tree(dir.path / "out");
+    const Run again = run(args(dem, dir / "out", {"--max-zoom", "8", "--resume", "--json"}), dir);
+    REQUIRE(again.code == 0);
+    CHECK(again.out.find("\"written\":0") != std::string::npos);
+    CHECK((tree(dir.path / "out") == before));
+    // --force replaces the layer: no zoom 9 leftovers after a rebuild to zoom 8.
+    const auto stray = dir.path / "out/terrain/9/0/0.glb";
+    fs::create_directories(stray.parent_path());
+    std::ofstream(stray) << "stray";
+    REQUIRE(run(args(dem, dir / "out", {"--max-zoom", "8", "--force"}), dir).code == 0);
+    CHECK_FALSE(fs::exists(stray));
+    CHECK((tree(dir.path / "out") == before));
+}
+
+TEST_CASE("bad build options and unusable outputs fail with clear errors") {
+    BuildDir dir;
+    const auto dem = write_dem(dir / "dem.tif");
+    std::ofstream(dir / "file") << "x";
+    struct Case {
+        std::vector<std::string> extra;
+        int code;
+        std::string message;
+    };
+    const std::vector<Case> cases = {
+        {{"--shard", "2/2"}, 2, "--shard '2/2'"},
+        {{"--shard", "one/2"}, 2, "is not a whole number"},
+        {{"--bbox", "1,2,3"}, 2, "expected W,S,E,N"},
+        {{"--bbox", "8,47,7,46"}, 2, "-180 <= W < E <= 180"},
+        {{"--bbox", "7,46,x,47"}, 2, "--bbox east: expected a number"},
+        {{"--threads", "0"}, 2, "--threads 0: expected 1..1024"},
+        {{"--threads", "many"}, 2, "--threads: expected a whole number"},
+        {{"--formats", "glb,png"}, 2, "unknown format 'png'"},
+        {{"--formats", "glb,glb"}, 2, "glb twice"},
+        {{"--force", "--resume"}, 2, "--force"},
+        {{"--finalize"}, 2, "nothing to finalize"},
+    };
+    for (const auto& c : cases) {
+        CAPTURE(c.message);
+        const Run r = run(args(dem, dir / "out", c.extra), dir);
+        CHECK(r.code == c.code);
+        CHECK(r.err.find(c.message) != std::string::npos);
+        if (r.err.find(c.message) == std::string::npos) {
+            MESSAGE(r.err);
+        }
+    }
+    CHECK_FALSE(fs::exists(dir.path / "out/terrain/tileset.json"));
+    // Output under a regular file: an IoError naming the path, exit 3.
+    for (const std::string& out : {dir / "file/out", dir / "file/out.sqlite"}) {
+        const Run r = run(args(dem, out), dir);
+        CHECK(r.code == 3);
+        CHECK(r.err.find(dir / "file") != std::string::npos);
+    }
+    const Run no_out = run({"build", dem}, dir);
+    CHECK(no_out.code == 2);
+    CHECK(no_out.err.find("-o OUT") != std::string::npos);
+    const Run missing = run({"build", dir / "nope.tif", "-o", dir / "o2"}, dir);
+    CHECK(missing.code == 2);
+    CHECK(missing.err.find("nope.tif") != std::string::npos);
+}
+
+TEST_CASE("a build that fills the disk fails with exit 3, and --resume finishes it with room") {
+    BuildDir dir;
+    const auto disk = dir.path / "disk";
+    fs::create_directories(disk);
+    if (::mount("tmpfs", disk.c_str(), "tmpfs", 0, "size=64k") != 0) {
+        MESSAGE("skipped: cannot mount a 64 KiB tmpfs at " << disk.string() << " (needs root)");
+        return;
+    }
+    struct Unmount {
+        fs::path p;
+        ~Unmount() { ::umount(p.c_str()); }
+    } unmount{disk};
+    const auto dem = write_dem(dir / "dem.tif");
+    const Run full = run(args(dem, (disk / "out").string(), {"--max-zoom", "10"}), dir);
+    CHECK(full.code == 3);
+    CHECK(full.err.find("disk is full") != std::string::npos);
+    CHECK_FALSE(fs::exists(disk / "out/terrain/tileset.json"));
+    // No temporary file is left, and every tile that is there is whole: compare with a clean run.
+    REQUIRE(run(args(dem, dir / "clean", {"--max-zoom", "10"}), dir).code == 0);
+    const auto clean = tree(dir.path / "clean");
+    std::size_t present = 0;
+    for (const auto& [rel, bytes] : tree(disk / "out")) {
+        CAPTURE(rel);
+        CHECK(rel.find(".tmp-") == std::string::npos);
+        if (rel.ends_with(".glb")) {
+            CHECK(clean.at(rel) == bytes);
+            ++present;
+        }
+    }
+    CHECK(present > 0);
+    // Move the partial output to a roomy disk and resume there.
+    fs::copy(disk / "out", dir.path / "moved", fs::copy_options::recursive);
+    const Run resumed = run(args(dem, dir / "moved", {"--max-zoom", "10", "--resume"}), dir);
+    INFO(resumed.err);
+    REQUIRE(resumed.code == 0);
+    CHECK((tree(dir.path / "moved") == clean));
+}
+
+TEST_CASE("build makes a decodable pyramid of a real DEM with nodata (elev.tif)") {
+    const std::string dem = std::string(TB_SHARED_DATA) + "/elev.tif";
+    if (!fs::exists(dem)) {
+        MESSAGE("skipped: " << dem << " is missing");
+        return;
+    }
+    BuildDir dir;
+    const Run r = run(
+        {"build", dem, "-o", dir / "lux.sqlite", "--size", "32", "--layer", "lux", "--json"}, dir);
+    INFO(r.err);
+    REQUIRE(r.code == 0);
+    CHECK(r.out.find("\"tileset_written\":true") != std::string::npos);
+    auto store = TileStore::open(dir / "lux.sqlite");
+    const auto tileset = store->get_document("lux", "tileset.json");
+    REQUIRE(tileset.has_value());
+    const auto tiles = sqlite_tiles(dir / "lux.sqlite");
+    CHECK(tiles.size() > 3);
+    for (const auto& [key, bytes] : tiles) {
+        CAPTURE(key);
+        CHECK(decode_glb(bytes).indices.size() >= 3);
+    }
+}
+
+TEST_CASE("a --bbox build makes only the tiles meeting the box, the same bytes, and no tileset") {
+    BuildDir dir;
+    const auto dem = write_dem(dir / "dem.tif");
+    REQUIRE(run(args(dem, dir / "whole"), dir).code == 0);
+    const Run part = run(args(dem, dir / "part", {"--bbox", "7.3,46.3,7.4,46.4", "--json"}), dir);
+    INFO(part.err);
+    REQUIRE(part.code == 0);
+    CHECK(part.out.find("\"tileset_written\":false") != std::string::npos);
+    CHECK(part.err.find("outside --bbox") != std::string::npos);
+    CHECK_FALSE(fs::exists(dir.path / "part/terrain/tileset.json"));
+    const auto whole = dir_tiles(dir.path / "whole", "terrain");
+    const auto some = dir_tiles(dir.path / "part", "terrain");
+    CHECK(some.size() >= 3);  // at least one tile per zoom 7..9
+    CHECK(some.size() < whole.size());
+    for (const auto& [key, bytes] : some) {
+        CAPTURE(key);
+        REQUIRE(whole.count(key) == 1);
+        CHECK(whole.at(key) == bytes);
+    }
+}

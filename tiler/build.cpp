@@ -1,0 +1,890 @@
+// The offline pyramid builder (see build.hpp for the order of events that makes it safe to
+// kill). Threads: N workers take tile indices from one atomic counter over the fixed order,
+// make the tile's formats and push the bytes into a bounded queue; the calling thread is the
+// only writer: it drains the queue into the store in batches and draws the progress.
+#include "tiler/build.hpp"
+
+#include "core/error.hpp"
+#include "tiler/log.hpp"
+#include "tiler/store.hpp"
+
+#include <algorithm>
+#include <charconv>
+#include <chrono>
+#include <condition_variable>
+#include <cstdio>
+#include <cstdlib>
+#include <deque>
+#include <exception>
+#include <filesystem>
+#include <map>
+#include <mutex>
+#include <sstream>
+#include <sys/stat.h>
+#include <thread>
+#include <unistd.h>
+
+#ifndef TB_VERSION
+#define TB_VERSION "0.0.0"
+#endif
+
+namespace tb::tiler {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+constexpr const char* kManifest = "build-manifest.json";
+constexpr std::size_t kBatchTiles = 64;  // tiles per SQLite transaction
+constexpr double kBatchSeconds = 1.0;    // ... or this long since the last commit
+constexpr double kLogEverySeconds = 5.0; // progress lines when stderr is no terminal
+constexpr double kBarEverySeconds = 0.1; // progress bar redraws on a terminal
+
+std::string shard_document(const ShardSpec& s) {
+    return "build-shards/" + std::to_string(s.index) + "-of-" + std::to_string(s.count) + ".json";
+}
+
+std::string tile_name(const TileId& id) {
+    return std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
+}
+
+std::string json_string(std::string_view s) {
+    std::string out = "\"";
+    for (unsigned char c : s) {
+        if (c == '"' || c == '\\') {
+            out += '\\';
+            out += static_cast<char>(c);
+        } else if (c < 0x20) {
+            char buf[8];
+            std::snprintf(buf, sizeof buf, "\\u%04x", c);
+            out += buf;
+        } else {
+            out += static_cast<char>(c);
+        }
+    }
+    return out + "\"";
+}
+
+std::string json_number(double v) {
+    char buf[32];
+    const auto r = std::to_chars(buf, buf + sizeof buf, v);
+    return std::string(buf, r.ptr);
+}
+
+// ---- the manifest: one "key": value per line, in a fixed order, no timestamps (so that
+// shards starting together write identical bytes) ----
+
+std::string source_entry(const std::string& source) {
+    std::string path = source;
+    std::string extra;
+    struct stat st {};
+    if (source.rfind("/vsi", 0) != 0 && ::stat(source.c_str(), &st) == 0) {
+        std::error_code ec;
+        const auto abs = std::filesystem::weakly_canonical(source, ec);
+        if (!ec) {
+            path = abs.string();
+        }
+        extra = ", \"size\": " + std::to_string(st.st_size) +
+                ", \"mtime\": " + std::to_string(static_cast<long long>(st.st_mtime));
+    }
+    return "{\"path\": " + json_string(path) + extra + "}";
+}
+
+using Manifest = std::vector<std::pair<std::string, std::string>>; // key, JSON value
+
+Manifest make_manifest(const BuildOptions& o, const Layer& layer, int shard_count) {
+    Manifest m;
+    m.emplace_back("terrabound_build", "1");
+    m.emplace_back("version", json_string(TB_VERSION));
+    m.emplace_back("layer", json_string(o.layer.name));
+    std::string sources = "[";
+    for (std::size_t i = 0; i < o.layer.sources.size(); ++i) {
+        sources += (i ? ", " : "") + source_entry(o.layer.sources[i]);
+    }
+    m.emplace_back("sources", sources + "]");
+    m.emplace_back("scheme", json_string(to_string(o.layer.scheme)));
+    m.emplace_back("tile_size", std::to_string(o.layer.tile_size));
+    m.emplace_back("datum", json_string(to_string(layer.source_datum())));
+    m.emplace_back("min_zoom", std::to_string(layer.min_zoom()));
+    m.emplace_back("max_zoom", std::to_string(layer.max_zoom()));
+    if (o.bbox) {
+        m.emplace_back("bbox",
+                       "[" + json_number(o.bbox->west) + ", " + json_number(o.bbox->south) + ", " +
+                           json_number(o.bbox->east) + ", " + json_number(o.bbox->north) + "]");
+    } else {
+        m.emplace_back("bbox", "null");
+    }
+    std::string formats = "[";
+    for (std::size_t i = 0; i < o.formats.size(); ++i) {
+        formats += std::string(i ? ", " : "") + json_string(extension(o.formats[i]));
+    }
+    m.emplace_back("formats", formats + "]");
+    std::string eps = "[";
+    for (int z = layer.min_zoom(); z <= layer.max_zoom(); ++z) {
+        eps += (z > layer.min_zoom() ? ", " : "") + json_number(layer.eps_for_zoom(z));
+    }
+    m.emplace_back("eps", eps + "]");
+    m.emplace_back("shard_count", std::to_string(shard_count));
+    return m;
+}
+
+std::string manifest_text(const Manifest& m) {
+    std::string out = "{\n";
+    for (std::size_t i = 0; i < m.size(); ++i) {
+        out +=
+            "  " + json_string(m[i].first) + ": " + m[i].second + (i + 1 < m.size() ? ",\n" : "\n");
+    }
+    return out + "}\n";
+}
+
+Manifest parse_manifest(const std::string& text) {
+    Manifest m;
+    std::istringstream in(text);
+    std::string line;
+    while (std::getline(in, line)) {
+        const auto q0 = line.find('"');
+        const auto q1 = q0 == std::string::npos ? q0 : line.find('"', q0 + 1);
+        const auto colon = q1 == std::string::npos ? q1 : line.find(": ", q1);
+        if (colon == std::string::npos) {
+            continue;
+        }
+        std::string value = line.substr(colon + 2);
+        if (!value.empty() && value.back() == ',') {
+            value.pop_back();
+        }
+        m.emplace_back(line.substr(q0 + 1, q1 - q0 - 1), value);
+    }
+    return m;
+}
+
+std::string lookup(const Manifest& m, const std::string& key) {
+    for (const auto& [k, v] : m) {
+        if (k == key) {
+            return v;
+        }
+    }
+    return "(absent)";
+}
+
+// Throws InputError naming the first parameter that differs. shard_count is checked only
+// when `check_shards` (shards and --finalize must agree on N; an unsharded resume need not).
+void compare_manifests(const Manifest& was,
+                       const Manifest& now,
+                       bool check_shards,
+                       const std::string& where) {
+    for (const auto& [key, value] : now) {
+        if (key == "shard_count" && !check_shards) {
+            continue;
+        }
+        const std::string old = lookup(was, key);
+        if (old != value) {
+            throw InputError(where + ": the existing build was made with different parameters: " +
+                             key + " was " + old + ", now " + value +
+                             "; rerun with the same parameters, or use --force to start over");
+        }
+    }
+}
+
+// ---- the queue between workers and the writer: bounded, so memory is too ----
+
+struct Made {
+    TileId id;
+    std::vector<std::pair<Format, std::string>> tiles;
+};
+
+class Queue {
+public:
+    explicit Queue(std::size_t capacity) : capacity_(capacity) {}
+
+    bool push(Made&& m) { // false once closed
+        std::unique_lock lock(mutex_);
+        not_full_.wait(lock, [&] { return closed_ || items_.size() < capacity_; });
+        if (closed_) {
+            return false;
+        }
+        items_.push_back(std::move(m));
+        not_empty_.notify_one();
+        return true;
+    }
+
+    // Waits up to `timeout`; nullopt when nothing came.
+    std::optional<Made> pop(std::chrono::milliseconds timeout) {
+        std::unique_lock lock(mutex_);
+        if (!not_empty_.wait_for(lock, timeout, [&] { return !items_.empty(); })) {
+            return std::nullopt;
+        }
+        Made m = std::move(items_.front());
+        items_.pop_front();
+        not_full_.notify_one();
+        return m;
+    }
+
+    void close() {
+        std::lock_guard lock(mutex_);
+        closed_ = true;
+        not_full_.notify_all();
+    }
+
+private:
+    std::size_t capacity_;
+    std::mutex mutex_;
+    std::condition_variable not_full_, not_empty_;
+    std::deque<Made> items_;
+    bool closed_ = false;
+};
+
+// ---- the fixed tile order: zoom ascending, then rows (y), then columns (x) ----
+
+struct Plan {
+    std::vector<TileRange> ranges;     // one per zoom, possibly empty
+    std::vector<std::int64_t> offsets; // index of each range's first tile
+    std::int64_t total = 0;
+
+    TileId at(std::int64_t i) const {
+        const auto k = static_cast<std::size_t>(
+            std::upper_bound(offsets.begin(), offsets.end(), i) - offsets.begin() - 1);
+        const TileRange& r = ranges[k];
+        const std::int64_t local = i - offsets[k];
+        const std::int64_t width = r.x1 - r.x0 + 1;
+        return TileId{r.z, r.x0 + local % width, r.y0 + local / width};
+    }
+};
+
+Plan make_plan(const Layer& layer, const BuildOptions& o) {
+    Plan plan;
+    for (int z = layer.min_zoom(); z <= layer.max_zoom(); ++z) {
+        TileRange r = layer.tiles_at(z);
+        if (o.bbox) {
+            const TileRange b = tiles_covering(o.layer.scheme, *o.bbox, z);
+            r.x0 = std::max(r.x0, b.x0);
+            r.y0 = std::max(r.y0, b.y0);
+            r.x1 = std::min(r.x1, b.x1);
+            r.y1 = std::min(r.y1, b.y1);
+        }
+        r.z = z;
+        if (r.empty()) {
+            continue;
+        }
+        plan.offsets.push_back(plan.total);
+        plan.ranges.push_back(r);
+        plan.total += r.count();
+    }
+    return plan;
+}
+
+// ---- progress ----
+
+std::string format_seconds(double s) {
+    if (!(s >= 0) || s > 1e7) {
+        return "?";
+    }
+    const long long t = static_cast<long long>(s + 0.5);
+    if (t < 100) {
+        return std::to_string(t) + " s";
+    }
+    if (t < 6000) {
+        return std::to_string(t / 60) + " min " + std::to_string(t % 60) + " s";
+    }
+    return std::to_string(t / 3600) + " h " + std::to_string(t / 60 % 60) + " min";
+}
+
+struct Counters {
+    std::atomic<std::int64_t> skipped{0}, empty{0}, failed{0}, made{0};
+};
+
+class Progress {
+public:
+    Progress(ProgressMode mode, std::int64_t planned) : planned_(planned), start_(Clock::now()) {
+        mode_ = mode == ProgressMode::Auto
+                    ? (::isatty(STDERR_FILENO) ? ProgressMode::Bar : ProgressMode::Lines)
+                    : mode;
+        last_ = start_;
+    }
+
+    void update(std::int64_t done, std::int64_t skipped, bool final) {
+        const auto now = Clock::now();
+        const double since = std::chrono::duration<double>(now - last_).count();
+        if (mode_ == ProgressMode::Off) {
+            return;
+        }
+        const double every = mode_ == ProgressMode::Bar ? kBarEverySeconds : kLogEverySeconds;
+        if (!final && since < every) {
+            return;
+        }
+        if (final && mode_ == ProgressMode::Lines) {
+            return; // the summary line follows
+        }
+        last_ = now;
+        const double elapsed = std::chrono::duration<double>(now - start_).count();
+        // Rate over tiles actually worked on: skipped tiles cost next to nothing.
+        const double worked = static_cast<double>(done - skipped);
+        const double rate = elapsed > 0 ? worked / elapsed : 0;
+        const double left = static_cast<double>(planned_ - done);
+        const std::string eta = rate > 0 ? format_seconds(left / rate) : "?";
+        const double pct = planned_ > 0
+                               ? 100.0 * static_cast<double>(done) / static_cast<double>(planned_)
+                               : 100.0;
+        char line[200];
+        if (mode_ == ProgressMode::Bar) {
+            constexpr int kWidth = 30;
+            const int filled = static_cast<int>(pct / 100 * kWidth);
+            std::string bar(static_cast<std::size_t>(filled), '#');
+            bar.resize(kWidth, '.');
+            std::snprintf(line,
+                          sizeof line,
+                          "\r%5.1f%% [%s] %lld/%lld tiles, %.0f tiles/s, eta %s\033[K",
+                          pct,
+                          bar.c_str(),
+                          static_cast<long long>(done),
+                          static_cast<long long>(planned_),
+                          rate,
+                          eta.c_str());
+            std::fputs(line, stderr);
+            if (final) {
+                std::fputc('\n', stderr);
+            }
+            std::fflush(stderr);
+        } else {
+            std::snprintf(line,
+                          sizeof line,
+                          "build %lld/%lld tiles (%.1f%%), %.0f tiles/s, eta %s",
+                          static_cast<long long>(done),
+                          static_cast<long long>(planned_),
+                          pct,
+                          rate,
+                          eta.c_str());
+            log::info(line);
+        }
+    }
+
+private:
+    ProgressMode mode_;
+    std::int64_t planned_;
+    Clock::time_point start_, last_;
+};
+
+// ---- the tileset, written last ----
+
+// "a/b/../c.json" -> "a/c.json"; empty when the path leaves the layer.
+std::string normalize(const std::string& dir, const std::string& uri) {
+    std::vector<std::string> parts;
+    std::istringstream in(dir + uri);
+    std::string part;
+    while (std::getline(in, part, '/')) {
+        if (part.empty() || part == ".") {
+            continue;
+        }
+        if (part == "..") {
+            if (parts.empty()) {
+                return "";
+            }
+            parts.pop_back();
+        } else {
+            parts.push_back(part);
+        }
+    }
+    std::string out;
+    for (const auto& p : parts) {
+        out += (out.empty() ? "" : "/") + p;
+    }
+    return out;
+}
+
+std::vector<std::string> uris_in(const std::string& json) {
+    std::vector<std::string> out;
+    constexpr std::string_view kKey = "\"uri\":";
+    for (auto at = json.find(kKey); at != std::string::npos; at = json.find(kKey, at + 1)) {
+        auto q0 = json.find('"', at + kKey.size());
+        auto q1 = q0 == std::string::npos ? q0 : json.find('"', q0 + 1);
+        if (q1 != std::string::npos) {
+            out.push_back(json.substr(q0 + 1, q1 - q0 - 1));
+        }
+    }
+    return out;
+}
+
+bool parse_tile_uri(const std::string& path, TileId& id, Format& format) {
+    const auto dot = path.rfind('.');
+    if (dot == std::string::npos) {
+        return false;
+    }
+    const auto f = parse_format(std::string_view(path).substr(dot + 1));
+    if (!f) {
+        return false;
+    }
+    long long v[3];
+    const char* p = path.data();
+    const char* end = path.data() + dot;
+    for (int k = 0; k < 3; ++k) {
+        const auto r = std::from_chars(p, end, v[k]);
+        if (r.ec != std::errc() || r.ptr == p || (k < 2 && (r.ptr == end || *r.ptr != '/'))) {
+            return false;
+        }
+        p = r.ptr + (k < 2 ? 1 : 0);
+    }
+    if (p != end || v[0] < 0 || v[0] > kMaxZoom) {
+        return false;
+    }
+    id = TileId{static_cast<int>(v[0]), v[1], v[2]};
+    format = *f;
+    return true;
+}
+
+// Collects the layer's documents by following "uri"s from tileset.json, checks that every tile
+// they name is in the store, then writes them with tileset.json last. Returns false (and says
+// why in the log) when a named tile is missing, writing nothing.
+bool write_tileset(const Layer& layer, TileStore& store, const std::string& name, bool bbox) {
+    std::vector<std::pair<std::string, std::string>> docs; // path, bytes; tileset.json first
+    std::vector<std::string> todo{"tileset.json"};
+    std::map<std::string, bool> seen{{"tileset.json", true}};
+    std::int64_t tiles = 0;
+    while (!todo.empty()) {
+        const std::string path = todo.back();
+        todo.pop_back();
+        std::string bytes;
+        if (!layer.document(path, bytes)) {
+            throw IoError("layer " + name + ": the tileset refers to document '" + path +
+                          "' that the layer does not make; this is a bug, please report it");
+        }
+        const auto slash = path.rfind('/');
+        const std::string dir = slash == std::string::npos ? "" : path.substr(0, slash + 1);
+        for (const auto& uri : uris_in(bytes)) {
+            const std::string target = normalize(dir, uri);
+            TileId id;
+            Format format;
+            if (parse_tile_uri(target, id, format)) {
+                ++tiles;
+                if (!store.contains(TileKey{name, id, format, -1})) {
+                    const std::string why =
+                        bbox ? "it lies outside --bbox; a partial build gets no tileset (serve "
+                               "the layer, or build without --bbox)"
+                             : "build it with --resume (and --formats " +
+                                   std::string(extension(format)) + ")";
+                    log::warn("build: tileset.json not written: it lists tile " + target +
+                              ", which is not in the store; " + why);
+                    return false;
+                }
+            } else if (!target.empty() && !seen[target]) {
+                seen[target] = true;
+                todo.push_back(target);
+            }
+        }
+        docs.emplace_back(path, std::move(bytes));
+    }
+    for (std::size_t i = docs.size(); i-- > 1;) {
+        store.put_document(name, docs[i].first, docs[i].second);
+    }
+    store.put_document(name, docs[0].first, docs[0].second);
+    log::info("build: wrote " + std::to_string(docs.size()) + " tileset document(s) listing " +
+              std::to_string(tiles) + " tiles");
+    return true;
+}
+
+struct ShardRecord {
+    std::int64_t present = 0;
+    std::int64_t empty = 0;
+};
+
+std::string shard_record_text(const ShardSpec& s, std::int64_t present, std::int64_t empty) {
+    return "{\"shard\": " + std::to_string(s.index) + ", \"count\": " + std::to_string(s.count) +
+           ", \"present\": " + std::to_string(present) + ", \"empty\": " + std::to_string(empty) +
+           "}\n";
+}
+
+std::optional<ShardRecord> parse_shard_record(const std::string& text) {
+    auto field = [&](const std::string& key) -> std::optional<std::int64_t> {
+        const auto at = text.find("\"" + key + "\": ");
+        if (at == std::string::npos) {
+            return std::nullopt;
+        }
+        std::int64_t v = 0;
+        const char* p = text.data() + at + key.size() + 4;
+        const auto r = std::from_chars(p, text.data() + text.size(), v);
+        if (r.ec != std::errc()) {
+            return std::nullopt;
+        }
+        return v;
+    };
+    const auto present = field("present");
+    const auto empty = field("empty");
+    if (!present || !empty) {
+        return std::nullopt;
+    }
+    return ShardRecord{*present, *empty};
+}
+
+void check_options(const BuildOptions& o) {
+    if (o.output.empty()) {
+        throw InputError("build: name the output with -o OUT (a directory, or a file ending in "
+                         ".sqlite)");
+    }
+    if (o.layer.sources.empty()) {
+        throw InputError("build: name at least one DEM to build from");
+    }
+    validate_layer_name(o.layer.name);
+    if (o.threads < 0 || o.threads > 1024) {
+        throw InputError("build: --threads " + std::to_string(o.threads) +
+                         ": expected 1..1024 (or 0 for one per core)");
+    }
+    if (o.formats.empty()) {
+        throw InputError("build: --formats: name at least one of glb, drc");
+    }
+    for (std::size_t i = 0; i < o.formats.size(); ++i) {
+        for (std::size_t j = 0; j < i; ++j) {
+            if (o.formats[i] == o.formats[j]) {
+                throw InputError(std::string("build: --formats names ") + extension(o.formats[i]) +
+                                 " twice");
+            }
+        }
+    }
+    if (o.bbox) {
+        const auto& b = *o.bbox;
+        const bool ok = b.west >= -180 && b.east <= 180 && b.south >= -90 && b.north <= 90 &&
+                        b.west < b.east && b.south < b.north;
+        if (!ok) {
+            throw InputError("build: --bbox " + json_number(b.west) + "," + json_number(b.south) +
+                             "," + json_number(b.east) + "," + json_number(b.north) +
+                             ": expected W,S,E,N in degrees with -180 <= W < E <= 180 and -90 <= "
+                             "S < N <= 90");
+        }
+    }
+    if (o.shard && (o.shard->count < 1 || o.shard->index < 0 || o.shard->index >= o.shard->count)) {
+        throw InputError("build: --shard " + std::to_string(o.shard->index) + "/" +
+                         std::to_string(o.shard->count) + ": expected I/N with 0 <= I < N");
+    }
+    if (o.force && (o.resume || o.shard || o.finalize)) {
+        throw InputError("build: --force starts over and cannot go with --resume, --shard or "
+                         "--finalize (with shards, clear the output once, then start the shards)");
+    }
+    if (o.finalize && o.shard) {
+        throw InputError("build: --finalize runs once after all shards; drop --shard");
+    }
+}
+
+} // namespace
+
+ShardSpec parse_shard(std::string_view text) {
+    const auto bad = [&](const std::string& why) {
+        return InputError("--shard '" + std::string(text) + "': " + why +
+                          "; expected I/N with 0 <= I < N (0-based), or auto/N");
+    };
+    const auto slash = text.find('/');
+    if (slash == std::string_view::npos) {
+        throw bad("no '/'");
+    }
+    auto to_int = [&](std::string_view s, const char* what) {
+        int v = 0;
+        const auto r = std::from_chars(s.data(), s.data() + s.size(), v);
+        if (s.empty() || r.ec != std::errc() || r.ptr != s.data() + s.size()) {
+            throw bad(std::string(what) + " '" + std::string(s) + "' is not a whole number");
+        }
+        return v;
+    };
+    ShardSpec s;
+    s.count = to_int(text.substr(slash + 1), "N");
+    const std::string_view first = text.substr(0, slash);
+    if (first == "auto") {
+        const char* names[] = {"JOB_COMPLETION_INDEX", "SLURM_ARRAY_TASK_ID"};
+        const char* value = nullptr;
+        for (const char* n : names) {
+            if ((value = std::getenv(n)) != nullptr) {
+                s.index = to_int(value, n);
+                break;
+            }
+        }
+        if (!value) {
+            throw bad("neither JOB_COMPLETION_INDEX nor SLURM_ARRAY_TASK_ID is set");
+        }
+    } else {
+        s.index = to_int(first, "I");
+    }
+    if (s.count < 1 || s.index < 0 || s.index >= s.count) {
+        throw bad("shard " + std::to_string(s.index) + " of " + std::to_string(s.count) +
+                  " does not exist");
+    }
+    return s;
+}
+
+int shard_of(const TileId& id, int count) {
+    // splitmix64 of the packed (z, x, y): stable across machines and releases.
+    std::uint64_t h = (static_cast<std::uint64_t>(id.z) << 58) ^
+                      (static_cast<std::uint64_t>(id.x) << 29) ^ static_cast<std::uint64_t>(id.y);
+    h += 0x9e3779b97f4a7c15ull;
+    h = (h ^ (h >> 30)) * 0xbf58476d1ce4e5b9ull;
+    h = (h ^ (h >> 27)) * 0x94d049bb133111ebull;
+    h ^= h >> 31;
+    return static_cast<int>(h % static_cast<std::uint64_t>(count));
+}
+
+std::string to_json(const BuildSummary& s) {
+    return "{\"planned\":" + std::to_string(s.planned) +
+           ",\"written\":" + std::to_string(s.written) +
+           ",\"skipped\":" + std::to_string(s.skipped) + ",\"empty\":" + std::to_string(s.empty) +
+           ",\"failed\":" + std::to_string(s.failed) + ",\"bytes\":" + std::to_string(s.bytes) +
+           ",\"seconds\":" + json_number(s.seconds) +
+           ",\"interrupted\":" + (s.interrupted ? "true" : "false") +
+           ",\"tileset_written\":" + (s.tileset_written ? "true" : "false") + "}";
+}
+
+BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop) {
+    const auto start = Clock::now();
+    check_options(o);
+    const auto layer = Layer::open(o.layer);
+    const std::string& name = o.layer.name;
+    auto store = TileStore::open(o.output);
+    const std::string where = o.output + " (layer " + name + ")";
+
+    const auto existing = store->get_document(name, kManifest);
+    int shard_count = o.shard ? o.shard->count : 1;
+    if (o.finalize && existing) {
+        // --finalize learns N from the shards' manifest.
+        const std::string n = lookup(parse_manifest(*existing), "shard_count");
+        const auto r = std::from_chars(n.data(), n.data() + n.size(), shard_count);
+        if (r.ec != std::errc() || shard_count < 1) {
+            throw IoError(where + ": " + std::string(kManifest) +
+                          " has no valid shard_count; "
+                          "it was not written by this terrabound; use --force to start over");
+        }
+    }
+    const Manifest manifest = make_manifest(o, *layer, shard_count);
+    if (o.force) {
+        if (store->has_layer(name)) {
+            log::info("build: --force: removing layer " + name + " from " + store->describe());
+            store->remove_layer(name);
+        }
+    } else if (o.resume || o.shard || o.finalize) {
+        if (existing) {
+            const Manifest was = parse_manifest(*existing);
+            compare_manifests(was, manifest, o.shard || o.finalize, where);
+        } else if (store->has_layer(name)) {
+            throw InputError(where + ": holds files but no " + std::string(kManifest) +
+                             ", so it was not made by terrabound build; use --force to overwrite "
+                             "or choose another output");
+        } else if (o.finalize) {
+            throw InputError(where + ": nothing to finalize (no " + std::string(kManifest) +
+                             "); run the shards first");
+        }
+    } else if (store->has_layer(name)) {
+        throw InputError(o.output + " exists (layer " + name +
+                         "); use --resume to continue or --force to overwrite");
+    }
+    if (!existing || o.force) {
+        store->put_document(name, kManifest, manifest_text(manifest));
+    }
+
+    const Plan plan = make_plan(*layer, o);
+    const bool check_present = o.resume || o.shard || o.finalize;
+    BuildSummary summary;
+
+    if (o.finalize) {
+        // Every shard must have reported; their tiles are then all in (a shard reports last).
+        std::int64_t reported = 0;
+        for (int i = 0; i < shard_count; ++i) {
+            const ShardSpec s{i, shard_count};
+            const auto text = store->get_document(name, shard_document(s));
+            const auto record = text ? parse_shard_record(*text) : std::nullopt;
+            if (!record) {
+                throw InputError(where + ": shard " + std::to_string(i) + "/" +
+                                 std::to_string(shard_count) + " has not finished (no " +
+                                 shard_document(s) + "); run it again with --shard " +
+                                 std::to_string(i) + "/" + std::to_string(shard_count) +
+                                 " --resume, then --finalize");
+            }
+            reported += record->present;
+            summary.skipped += record->present;
+            summary.empty += record->empty;
+        }
+        summary.planned = summary.skipped + summary.empty;
+        store->clean_up(name);
+        summary.tileset_written = write_tileset(*layer, *store, name, o.bbox.has_value());
+        if (!summary.tileset_written) {
+            throw IoError(where + ": --finalize: tiles the tileset lists are missing although "
+                                  "every shard reported (see the warning above); run each shard "
+                                  "again with --resume");
+        }
+        log::info("build: finalized " + std::to_string(shard_count) + " shard(s), " +
+                  std::to_string(reported) + " tiles");
+        summary.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+        return summary;
+    }
+
+    // This run's share of the plan.
+    const auto mine = [&](const TileId& id) {
+        return !o.shard || shard_of(id, o.shard->count) == o.shard->index;
+    };
+    if (!o.shard) {
+        summary.planned = plan.total;
+    } else {
+        for (std::int64_t i = 0; i < plan.total; ++i) {
+            summary.planned += mine(plan.at(i)) ? 1 : 0;
+        }
+    }
+    const int threads = o.threads > 0
+                            ? o.threads
+                            : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+    log::info("build: " + std::to_string(summary.planned) + " tiles, zoom " +
+              std::to_string(layer->min_zoom()) + ".." + std::to_string(layer->max_zoom()) + ", " +
+              std::to_string(threads) + " thread(s), into " + store->describe() +
+              (o.shard ? ", shard " + std::to_string(o.shard->index) + "/" +
+                             std::to_string(o.shard->count)
+                       : ""));
+
+    Counters counters;
+    std::atomic<std::int64_t> next{0};
+    std::atomic<bool> abort{false}; // the writer failed: workers stop at once
+    Queue queue(static_cast<std::size_t>(threads) * 2);
+    std::mutex error_mutex;
+    std::exception_ptr worker_error;
+
+    auto work = [&] {
+        try {
+            for (;;) {
+                if (stop.load() || abort.load()) {
+                    return;
+                }
+                const std::int64_t i = next.fetch_add(1);
+                if (i >= plan.total) {
+                    return;
+                }
+                const TileId id = plan.at(i);
+                if (!mine(id)) {
+                    continue;
+                }
+                if (!layer->may_have_tile(id)) {
+                    ++counters.empty;
+                    continue;
+                }
+                if (check_present) {
+                    bool all = true;
+                    for (Format f : o.formats) {
+                        all = all && store->contains(TileKey{name, id, f, -1});
+                    }
+                    if (all) {
+                        ++counters.skipped;
+                        continue;
+                    }
+                }
+                Made made{id, {}};
+                try {
+                    for (Format f : o.formats) {
+                        made.tiles.emplace_back(f, layer->make_tile(id, f));
+                    }
+                } catch (const NotFound&) {
+                    ++counters.empty;
+                    continue;
+                } catch (const IoError&) {
+                    throw; // the DEM became unreadable: no point going on
+                } catch (const std::exception& e) {
+                    ++counters.failed;
+                    log::error("build: tile " + tile_name(id) + ": " + e.what());
+                    continue;
+                }
+                if (!queue.push(std::move(made))) {
+                    return;
+                }
+            }
+        } catch (...) {
+            std::lock_guard lock(error_mutex);
+            if (!worker_error) {
+                worker_error = std::current_exception();
+            }
+            abort = true;
+        }
+    };
+
+    std::vector<std::thread> workers;
+    std::atomic<int> running{threads};
+    for (int t = 0; t < threads; ++t) {
+        workers.emplace_back([&] {
+            work();
+            --running;
+        });
+    }
+
+    Progress progress(o.progress, summary.planned);
+    std::vector<StoredTile> batch;
+    auto last_flush = Clock::now();
+    std::int64_t batch_tiles = 0;
+    std::exception_ptr writer_error;
+    auto flush = [&] {
+        if (batch.empty()) {
+            return;
+        }
+        std::int64_t bytes = 0;
+        for (const auto& t : batch) {
+            bytes += static_cast<std::int64_t>(t.bytes.size());
+        }
+        store->put_batch(batch);
+        summary.written += batch_tiles;
+        summary.bytes += bytes;
+        batch.clear();
+        batch_tiles = 0;
+        last_flush = Clock::now();
+    };
+    try {
+        for (;;) {
+            auto made = queue.pop(std::chrono::milliseconds(50));
+            if (made) {
+                for (auto& [f, bytes] : made->tiles) {
+                    batch.push_back({TileKey{name, made->id, f, -1}, std::move(bytes)});
+                }
+                ++batch_tiles;
+                ++counters.made;
+            } else if (running.load() == 0) {
+                // Workers are gone and nothing came within the wait: the queue is drained
+                // (a worker's last push happens before it counts itself out).
+                if (!(made = queue.pop(std::chrono::milliseconds(0)))) {
+                    break;
+                }
+                for (auto& [f, bytes] : made->tiles) {
+                    batch.push_back({TileKey{name, made->id, f, -1}, std::move(bytes)});
+                }
+                ++batch_tiles;
+                ++counters.made;
+            }
+            const double since = std::chrono::duration<double>(Clock::now() - last_flush).count();
+            if (batch_tiles >= static_cast<std::int64_t>(kBatchTiles) ||
+                (since >= kBatchSeconds && !batch.empty())) {
+                flush();
+            }
+            progress.update(counters.made + counters.skipped + counters.empty + counters.failed,
+                            counters.skipped,
+                            false);
+        }
+        flush();
+    } catch (...) {
+        writer_error = std::current_exception();
+        abort = true;
+        queue.close();
+    }
+    for (auto& w : workers) {
+        w.join();
+    }
+    if (writer_error) {
+        std::rethrow_exception(writer_error);
+    }
+    if (worker_error) {
+        std::rethrow_exception(worker_error);
+    }
+    summary.skipped = counters.skipped;
+    summary.empty = counters.empty;
+    summary.failed = counters.failed;
+    const std::int64_t done = summary.written + summary.skipped + summary.empty + summary.failed;
+    progress.update(done, summary.skipped, true);
+    summary.interrupted = stop.load() && done < summary.planned;
+
+    if (!summary.interrupted && summary.failed == 0) {
+        if (o.shard) {
+            store->put_document(
+                name,
+                shard_document(*o.shard),
+                shard_record_text(*o.shard, summary.written + summary.skipped, summary.empty));
+        } else {
+            store->clean_up(name);
+            summary.tileset_written = write_tileset(*layer, *store, name, o.bbox.has_value());
+        }
+    }
+    summary.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+    return summary;
+}
+
+} // namespace tb::tiler

@@ -1,0 +1,79 @@
+#pragma once
+// The offline pyramid builder behind `terrabound build`: every tile of a layer, zoom by zoom,
+// made by N worker threads and written to a TileStore by one writer, resumable and shardable.
+//
+// Order of events, which is what makes a build safe to kill at any moment:
+//   1. the manifest document "build-manifest.json" (everything that decides the tiles' bytes);
+//   2. tiles, each write atomic (directory: temp + fsync + rename; SQLite: batched transactions);
+//   3. unsharded: the layer's tileset documents, "tileset.json" last, so a tileset never points
+//      at a missing tile. A shard I of N instead writes "build-shards/I-of-N.json" when all its
+//      tiles are in, and `--finalize` writes the tileset once every shard has reported.
+// Tiles are enumerated in a fixed order (zoom ascending, then row-major y, x) and each tile's
+// bytes depend on the tile alone, so the output is the same whatever the thread count.
+#include "tiler/format.hpp"
+#include "tiler/layer.hpp"
+#include "tiler/tile_grid.hpp"
+
+#include <atomic>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace tb::tiler {
+
+// Shard I of N, 0-based (0 <= index < count), like Kubernetes' JOB_COMPLETION_INDEX.
+struct ShardSpec {
+    int index = 0;
+    int count = 1;
+};
+
+// "I/N", or "auto/N" to take I from JOB_COMPLETION_INDEX (Kubernetes Indexed Job) or else
+// SLURM_ARRAY_TASK_ID. InputError naming the problem otherwise.
+ShardSpec parse_shard(std::string_view text);
+// The shard that owns a tile: a hash of (z, x, y), so shards get even shares of every zoom.
+int shard_of(const TileId& id, int count);
+
+enum class ProgressMode {
+    Auto,  // a live bar when stderr is a terminal, log lines every few seconds otherwise
+    Bar,   // a single line redrawn with '\r'
+    Lines, // "info  build 1234/5000 tiles (24.7%), 310 tiles/s, eta 12 s" every few seconds
+    Off,
+};
+
+struct BuildOptions {
+    LayerOptions layer;            // name, sources, scheme, tile size, zooms, finest eps
+    std::string output;            // a directory, or a file ending in .sqlite / .db
+    std::optional<LonLatBox> bbox; // only tiles meeting this box (degrees)
+    std::vector<Format> formats{Format::Glb};
+    int threads = 0;                // worker threads; 0 = one per core
+    bool resume = false;            // continue a build: same manifest, present tiles skipped
+    bool force = false;             // delete the layer's existing tiles and documents first
+    bool finalize = false;          // after all shards: verify and write the tileset
+    std::optional<ShardSpec> shard; // build only this shard's tiles (implies resume)
+    ProgressMode progress = ProgressMode::Auto;
+};
+
+struct BuildSummary {
+    std::int64_t planned = 0; // tiles of this run (this shard's share)
+    std::int64_t written = 0; // tiles made and written now
+    std::int64_t skipped = 0; // already in the store (resume)
+    std::int64_t empty = 0;   // no data there (NotFound): nothing written
+    std::int64_t failed = 0;  // make_tile threw anything else: logged, nothing written
+    std::int64_t bytes = 0;   // bytes of tiles written now
+    double seconds = 0;
+    bool interrupted = false; // stopped by the stop flag (SIGINT/SIGTERM)
+    bool tileset_written = false;
+};
+
+// One line of JSON: {"planned":..,"written":..,...,"interrupted":false}.
+std::string to_json(const BuildSummary& summary);
+
+// Runs a build. `stop` is polled: once it is true no new tile is started, tiles in flight are
+// finished and written, and the summary comes back with interrupted = true. Throws InputError
+// for bad options or a manifest mismatch, IoError when the store fails (the build stops at
+// once; everything written before stays valid for --resume).
+BuildSummary build_pyramid(const BuildOptions& options, const std::atomic<bool>& stop);
+
+} // namespace tb::tiler

@@ -1,0 +1,126 @@
+// TileStore: choosing a store by path, and the name checks both stores share.
+#include "tiler/store.hpp"
+
+#include "core/error.hpp"
+
+#include <memory>
+#include <string>
+
+namespace tb::tiler {
+
+std::unique_ptr<TileStore> open_directory_store(const std::string& path); // store_dir.cpp
+std::unique_ptr<TileStore> open_sqlite_store(const std::string& path);    // store_sqlite.cpp
+
+namespace {
+
+bool ends_with(const std::string& s, std::string_view suffix) {
+    return s.size() >= suffix.size() &&
+           s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+// Shows a name in an error message without letting control bytes into the log.
+std::string printable(const std::string& s) {
+    std::string out;
+    for (unsigned char c : s.substr(0, 80)) {
+        if (c < 0x20 || c >= 0x7f) {
+            static const char* hex = "0123456789abcdef";
+            out += "\\x";
+            out += hex[c >> 4];
+            out += hex[c & 15];
+        } else {
+            out += static_cast<char>(c);
+        }
+    }
+    return s.size() > 80 ? out + "..." : out;
+}
+
+} // namespace
+
+std::unique_ptr<TileStore> TileStore::open(const std::string& path) {
+    if (path.empty()) {
+        throw InputError("tile store: empty path; name a directory or an .sqlite file");
+    }
+    if (ends_with(path, ".sqlite") || ends_with(path, ".db")) {
+        return open_sqlite_store(path);
+    }
+    return open_directory_store(path);
+}
+
+void TileStore::put_batch(std::span<const StoredTile> tiles) {
+    for (const auto& t : tiles) {
+        put(t.key, t.bytes);
+    }
+}
+
+void validate_layer_name(const std::string& layer) {
+    bool ok = !layer.empty() && layer.size() <= 64;
+    for (char c : layer) {
+        const bool allowed = (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') ||
+                             (c >= '0' && c <= '9') || c == '_' || c == '-';
+        ok = ok && allowed;
+    }
+    if (!ok) {
+        throw InputError("layer name '" + printable(layer) +
+                         "': use 1 to 64 of the characters A-Z a-z 0-9 _ -");
+    }
+}
+
+void validate_document_name(const std::string& name) {
+    auto fail = [&](const std::string& why) {
+        throw InputError("document name '" + printable(name) + "': " + why +
+                         "; name a relative path inside the layer, such as 'tileset.json'");
+    };
+    if (name.empty()) {
+        fail("empty");
+    }
+    if (name.size() > 512) {
+        fail("longer than 512 bytes");
+    }
+    if (name.front() == '/') {
+        fail("absolute path");
+    }
+    for (unsigned char c : name) {
+        if (c == 0) {
+            fail("contains a NUL byte");
+        }
+        if (c == '\\') {
+            fail("contains a backslash");
+        }
+        if (c < 0x20 || c >= 0x7f) {
+            fail("contains a control or non-ASCII byte");
+        }
+    }
+    std::size_t start = 0;
+    while (start <= name.size()) {
+        std::size_t end = name.find('/', start);
+        if (end == std::string::npos) {
+            end = name.size();
+        }
+        const std::string_view part(name.data() + start, end - start);
+        if (part.empty()) {
+            fail("has an empty path part ('//' or a trailing '/')");
+        }
+        if (part.front() == '.') {
+            fail("has a part starting with '.' ('..', '.', or a hidden name)");
+        }
+        start = end + 1;
+    }
+}
+
+void validate_key(const TileKey& key) {
+    validate_layer_name(key.layer);
+    const auto& id = key.id;
+    const bool ok = id.z >= 0 && id.z <= kMaxZoom && id.x >= 0 && id.y >= 0 &&
+                    id.x < (std::int64_t{2} << id.z) && id.y < (std::int64_t{2} << id.z);
+    if (!ok) {
+        throw InputError("tile " + std::to_string(id.z) + "/" + std::to_string(id.x) + "/" +
+                         std::to_string(id.y) + ": outside every tiling scheme (z 0.." +
+                         std::to_string(kMaxZoom) + ", x and y from 0 below 2^(z+1))");
+    }
+    if (key.eps_level < -1) {
+        throw InputError("eps level " + std::to_string(key.eps_level) +
+                         ": expected -1 (the zoom's ladder eps) or a level index >= 0");
+    }
+}
+
+} // namespace tb::tiler
