@@ -66,10 +66,22 @@ bool segment_fits(
     return k < 0 || worst <= eps;
 }
 
-std::vector<int>
-fit_breakpoints(std::span<const float> z, std::span<const std::uint8_t> valid, double eps) {
+int max_step_for(double max_edge) {
+    if (!(max_edge > 0.0)) {
+        return 0;
+    }
+    return static_cast<int>(std::clamp(std::floor(max_edge), 1.0, 2147483647.0));
+}
+
+std::vector<int> fit_breakpoints(std::span<const float> z,
+                                 std::span<const std::uint8_t> valid,
+                                 double eps,
+                                 int max_step) {
     const int n = static_cast<int>(z.size());
     TB_ASSERT(n >= 2);
+    TB_ASSERT(max_step >= 0);
+    // The longest hop allowed; a hop of one sample always is, so n - 1 stays reachable.
+    const int reach = max_step > 0 ? max_step : n;
     TB_ASSERT(valid.empty() || valid.size() == z.size());
     TB_ASSERT(eps > 0.0);
     // Shortest hops from 0: a hop i -> j is allowed when the segment stays within the eps
@@ -85,7 +97,8 @@ fit_breakpoints(std::span<const float> z, std::span<const std::uint8_t> valid, d
         const double zi = z[static_cast<std::size_t>(i)];
         double lo = -std::numeric_limits<double>::infinity();
         double hi = std::numeric_limits<double>::infinity();
-        for (int j = i + 1; j < n; ++j) {
+        const int last = static_cast<int>(std::min<std::int64_t>(std::int64_t{i} + reach, n - 1));
+        for (int j = i + 1; j <= last; ++j) {
             const double zj = z[static_cast<std::size_t>(j)];
             const double run = j - i;
             const double slope = (zj - zi) / run;
@@ -118,7 +131,7 @@ fit_breakpoints(std::span<const float> z, std::span<const std::uint8_t> valid, d
     return out;
 }
 
-std::vector<int> border_breakpoints(const HeightGrid& grid, double eps, int side) {
+std::vector<int> border_breakpoints(const HeightGrid& grid, double eps, int side, int max_step) {
     const int w = grid.width;
     const int h = grid.height;
     const bool row = side < 2;
@@ -136,12 +149,12 @@ std::vector<int> border_breakpoints(const HeightGrid& grid, double eps, int side
             valid[static_cast<std::size_t>(k)] = grid.is_valid(x, y) ? 1 : 0;
         }
     }
-    return fit_breakpoints(z, valid, eps);
+    return fit_breakpoints(z, valid, eps, max_step);
 }
 
 namespace {
 
-std::vector<int> column_breakpoints(const HeightGrid& grid, double eps, int x) {
+std::vector<int> column_breakpoints(const HeightGrid& grid, double eps, int x, int max_step) {
     std::vector<float> z(static_cast<std::size_t>(grid.height));
     std::vector<std::uint8_t> valid;
     if (!grid.valid.empty()) {
@@ -153,10 +166,10 @@ std::vector<int> column_breakpoints(const HeightGrid& grid, double eps, int x) {
             valid[static_cast<std::size_t>(y)] = grid.is_valid(x, y) ? 1 : 0;
         }
     }
-    return fit_breakpoints(z, valid, eps);
+    return fit_breakpoints(z, valid, eps, max_step);
 }
 
-std::vector<int> row_breakpoints(const HeightGrid& grid, double eps, int y) {
+std::vector<int> row_breakpoints(const HeightGrid& grid, double eps, int y, int max_step) {
     const auto first = grid.heights.begin() + static_cast<std::ptrdiff_t>(y) * grid.width;
     std::span<const float> z(&*first, static_cast<std::size_t>(grid.width));
     std::span<const std::uint8_t> valid;
@@ -165,19 +178,19 @@ std::vector<int> row_breakpoints(const HeightGrid& grid, double eps, int y) {
                                                   static_cast<std::size_t>(y) * grid.width,
                                               static_cast<std::size_t>(grid.width));
     }
-    return fit_breakpoints(z, valid, eps);
+    return fit_breakpoints(z, valid, eps, max_step);
 }
 
 } // namespace
 
-std::vector<GridPoint> anchor_points(const HeightGrid& grid, double eps) {
+std::vector<GridPoint> anchor_points(const HeightGrid& grid, double eps, int max_step) {
     const int w = grid.width;
     const int h = grid.height;
     std::vector<GridPoint> pts;
-    const auto top = border_breakpoints(grid, eps, 0);
-    const auto bottom = border_breakpoints(grid, eps, 1);
-    const auto left = border_breakpoints(grid, eps, 2);
-    const auto right = border_breakpoints(grid, eps, 3);
+    const auto top = border_breakpoints(grid, eps, 0, max_step);
+    const auto bottom = border_breakpoints(grid, eps, 1, max_step);
+    const auto left = border_breakpoints(grid, eps, 2, max_step);
+    const auto right = border_breakpoints(grid, eps, 3, max_step);
     for (int x : top) {
         pts.push_back({x, 0});
     }
@@ -196,7 +209,7 @@ std::vector<GridPoint> anchor_points(const HeightGrid& grid, double eps) {
         const int x = cols[i];
         // Only the scan line's interior breakpoints: its ends lie on the other two borders,
         // whose vertices are exactly their own fits.
-        const auto ys = column_breakpoints(grid, eps, x);
+        const auto ys = column_breakpoints(grid, eps, x, max_step);
         for (std::size_t k = 1; k + 1 < ys.size(); ++k) {
             pts.push_back({x, ys[k]});
         }
@@ -205,7 +218,7 @@ std::vector<GridPoint> anchor_points(const HeightGrid& grid, double eps) {
     const auto& rows = right.size() < left.size() ? right : left;
     for (std::size_t i = 1; i + 1 < rows.size(); ++i) {
         const int y = rows[i];
-        const auto xs = row_breakpoints(grid, eps, y);
+        const auto xs = row_breakpoints(grid, eps, y, max_step);
         for (std::size_t k = 1; k + 1 < xs.size(); ++k) {
             pts.push_back({xs[k], y});
         }

@@ -18,8 +18,13 @@ namespace tb::core {
 // (z, valid, eps): two tiles reading the same border in the same direction get the same points.
 // Ties between optimal chains are broken deterministically (each breakpoint is reached from the
 // lowest-index predecessor at the same hop count). O(n * reach).
-std::vector<int>
-fit_breakpoints(std::span<const float> z, std::span<const std::uint8_t> valid, double eps);
+// max_step >= 1 additionally limits every segment to at most max_step samples (j - i <=
+// max_step); the chain is then the fewest breakpoints under both constraints, still a pure
+// function of (z, valid, eps, max_step). max_step = 0: no limit.
+std::vector<int> fit_breakpoints(std::span<const float> z,
+                                 std::span<const std::uint8_t> valid,
+                                 double eps,
+                                 int max_step = 0);
 
 // True when the segment from sample i to sample j (i < j) keeps every valid sample in between
 // within eps (the exact test the fit is verified with).
@@ -32,11 +37,16 @@ struct HeightGrid;
 // columns top to bottom), then the breakpoints of the vertical scan lines through the interior
 // breakpoints of the horizontal border with fewer breakpoints, and of the horizontal scan lines
 // through those of the vertical border with fewer breakpoints. Sorted in raster order, unique,
-// always containing the four corners.
-std::vector<GridPoint> anchor_points(const HeightGrid& grid, double eps);
+// always containing the four corners. max_step as in fit_breakpoints, for every fit.
+std::vector<GridPoint> anchor_points(const HeightGrid& grid, double eps, int max_step = 0);
 
 // The breakpoints of one border: side 0 = top row (y = 0), 1 = bottom row, 2 = left column
 // (x = 0), 3 = right column; positions along the border.
-std::vector<int> border_breakpoints(const HeightGrid& grid, double eps, int side);
+std::vector<int>
+border_breakpoints(const HeightGrid& grid, double eps, int side, int max_step = 0);
+
+// The longest 1-D step an edge bound allows: floor(max_edge), at least 1; 0 for no bound
+// (max_edge == 0). Along a border or scan line an edge of j - i samples has length j - i.
+int max_step_for(double max_edge);
 
 } // namespace tb::core

@@ -142,4 +142,16 @@ double max_error(const Mesh& mesh, const HeightGrid& grid) {
     return worst;
 }
 
+double longest_edge(const Mesh& mesh) {
+    std::int64_t best = 0;
+    for (std::size_t e = 0; e < mesh.triangles.size(); ++e) {
+        const Index next = static_cast<Index>(e % 3 == 2 ? e - 2 : e + 1);
+        const GridPoint a = mesh.points[mesh.triangles[e]];
+        const GridPoint b = mesh.points[mesh.triangles[next]];
+        const std::int64_t dx = b.x - a.x, dy = b.y - a.y;
+        best = std::max(best, dx * dx + dy * dy);
+    }
+    return std::sqrt(static_cast<double>(best));
+}
+
 } // namespace tb::core

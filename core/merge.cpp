@@ -3,7 +3,8 @@
 // area-weighted mean normal); a vertex is removed and its hole re-triangulated optimally
 // (polygon_dp.cpp) when that does not increase the neighbourhood's error points. Border
 // vertices are removed only when the border is not locked, only along a straight border, and
-// never at the four corners.
+// never at the four corners. Triangles with an edge over max_edge are never used, so a vertex
+// whose hole has no such re-triangulation stays.
 #include <algorithm>
 #include <array>
 #include <climits>
@@ -161,6 +162,14 @@ bool Refiner::try_remove(Index v, std::vector<Index>& ring) {
         }
         if (state[id] != kUnknown) {
             return estimate[id];
+        }
+        if (too_long(pts[static_cast<std::size_t>(i)], pts[static_cast<std::size_t>(j)]) ||
+            too_long(pts[static_cast<std::size_t>(j)], pts[static_cast<std::size_t>(k)]) ||
+            too_long(pts[static_cast<std::size_t>(k)], pts[static_cast<std::size_t>(i)])) {
+            // An edge over max_edge (a diagonal, or the closing edge of a border hole): the
+            // triangle may not be used; with none left the vertex stays.
+            state[id] = kRuledOut;
+            return std::nullopt;
         }
         bool covers = false;
         if (v_counts && !honours_v(i, j, k, covers)) {

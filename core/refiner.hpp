@@ -4,6 +4,7 @@
 // every live triangle with error points has a current entry in the split queue.
 #include <cstdint>
 #include <queue>
+#include <utility>
 #include <vector>
 
 #include "core/error_scan.hpp"
@@ -16,12 +17,15 @@ namespace tb::core {
 class Refiner {
 public:
     // Takes the initial triangulation (§3.1) and scans every triangle. grid must outlive the
-    // refiner (it is kept by reference); eps > 0.
-    Refiner(const HeightGrid& grid, double eps, bool lock_border, Tin tin);
+    // refiner (it is kept by reference); eps > 0; max_edge 0 (no limit) or >= kMinMaxEdge,
+    // and with lock_border the border edges of tin already within max_edge.
+    Refiner(const HeightGrid& grid, double eps, bool lock_border, double max_edge, Tin tin);
 
     // The split agent (split.cpp): while some valid sample is over eps, insert the worst sample
-    // of the triangle with the most error points and swap diagonals around it. On return
-    // error_points() == 0.
+    // of the triangle with the most error points and swap diagonals around it. When none is,
+    // the globally longest edge over max_edge is split at the lattice sample nearest its
+    // midpoint (or swapped away when no sample is left near it). On return error_points() == 0
+    // and no edge is longer than max_edge. Swaps never create an edge over max_edge.
     void split_until_clean();
 
     // One pass of the merge agent (merge.cpp) over the vertices, flattest neighbourhood first:
@@ -65,14 +69,25 @@ private:
     void release(Index t);                            // forgets t's stats, frees it
     void swap_around(Index p, std::vector<Index>& stack);
     bool try_remove(Index v, std::vector<Index>& ring);
+    // Squared length of t's longest edge and that edge (first of equals).
+    std::int64_t longest_edge2(Index t, Index& edge) const;
+    bool too_long(GridPoint a, GridPoint b) const;
+    // Removes the over-long edge e (the globally longest edge): see split_until_clean.
+    void shorten(Index e, std::vector<Index>& stack);
+    void insert_at(Index t, GridPoint q, std::vector<Index>& stack);
 
     const HeightGrid& grid_;
     double eps_;
     bool lock_border_;
+    double max_edge_;
+    std::int64_t max_edge2_floor_; // the largest integer squared length <= max_edge^2
     Tin tin_;
     std::vector<TriangleStats> stats_;
     std::vector<std::uint32_t> version_;
     std::priority_queue<QueueEntry> queue_;
+    // Triangles that may have an edge over max_edge: (squared longest edge, -t), longest first.
+    // Entries go stale when t changes; a changed triangle is always pushed again.
+    std::priority_queue<std::pair<std::int64_t, std::int64_t>> long_queue_;
     std::int64_t error_points_ = 0;
     // Vertex v's neighbourhood changed since the merge agent last failed to remove it.
     std::vector<std::uint8_t> dirty_;

@@ -3,14 +3,54 @@
 // figure 4c), then diagonals are swapped toward fewer error points, Delaunay on ties, and the
 // swaps propagate recursively inside the fan of the new point (figure 4b). A swap is made only
 // across a strictly convex quadrilateral, so no triangle ever loses its positive area.
+//
+// The edge bound (TriangulateOptions::max_edge) is an addition to the paper: swaps never make
+// an edge over max_edge, and once no sample is over eps the globally longest over-long edge is
+// removed: split at the lattice sample nearest its midpoint, else (its two triangles hold no
+// other sample) swapped. Each step either inserts a vertex (finitely many samples) or replaces
+// the longest edge by a strictly shorter one, so the loop ends.
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <numeric>
+
 #include "core/error.hpp"
 #include "core/predicates.hpp"
 #include "core/refiner.hpp"
 
 namespace tb::core {
 
-Refiner::Refiner(const HeightGrid& grid, double eps, bool lock_border, Tin tin)
-    : grid_(grid), eps_(eps), lock_border_(lock_border), tin_(std::move(tin)) {
+namespace {
+
+std::int64_t length2(GridPoint a, GridPoint b) {
+    const std::int64_t dx = b.x - a.x, dy = b.y - a.y;
+    return dx * dx + dy * dy;
+}
+
+// The largest integer k with sqrt(k) <= max_edge, as the final check computes lengths.
+std::int64_t max_length2(double max_edge) {
+    if (!(max_edge > 0.0) || max_edge >= 4.0e6) {
+        return INT64_MAX; // no limit, or longer than any grid diagonal (2^20 * sqrt(2))
+    }
+    auto k = static_cast<std::int64_t>(std::floor(max_edge * max_edge));
+    while (std::sqrt(static_cast<double>(k + 1)) <= max_edge) {
+        ++k;
+    }
+    while (k > 0 && std::sqrt(static_cast<double>(k)) > max_edge) {
+        --k;
+    }
+    return k;
+}
+
+} // namespace
+
+Refiner::Refiner(const HeightGrid& grid, double eps, bool lock_border, double max_edge, Tin tin)
+    : grid_(grid),
+      eps_(eps),
+      lock_border_(lock_border),
+      max_edge_(max_edge),
+      max_edge2_floor_(max_length2(max_edge)),
+      tin_(std::move(tin)) {
     for (Index t = 0; t < tin_.triangle_slots(); ++t) {
         if (tin_.alive(t)) {
             set_stats(t, scan(t));
@@ -28,7 +68,13 @@ void Refiner::compact() {
     version_.assign(stats_.size(), 0);
     dirty_.assign(tin_.points.size(), 1);
     queue_ = {};
+    long_queue_ = {};
     for (Index t = 0; t < stats_.size(); ++t) {
+        Index e = kNone;
+        const std::int64_t l2 = longest_edge2(t, e);
+        if (l2 > max_edge2_floor_) {
+            long_queue_.push({l2, -static_cast<std::int64_t>(t)});
+        }
         const TriangleStats& st = stats_[t];
         if (st.error_points > 0) {
             const double fraction = static_cast<double>(st.error_points) / st.samples;
@@ -59,6 +105,13 @@ void Refiner::set_stats(Index t, const TriangleStats& st) {
     if (tin_.alive(t)) {
         for (Index e = 3 * t; e < 3 * t + 3; ++e) {
             dirty_[tin_.triangles[e]] = 1;
+        }
+        if (max_edge2_floor_ != INT64_MAX) {
+            Index e = kNone;
+            const std::int64_t l2 = longest_edge2(t, e);
+            if (l2 > max_edge2_floor_) {
+                long_queue_.push({l2, -static_cast<std::int64_t>(t)});
+            }
         }
     }
     if (st.error_points > 0) {
@@ -97,7 +150,7 @@ void Refiner::swap_around(Index p, std::vector<Index>& stack) {
         // and Delaunay already is not scanned at all.
         const std::int64_t now = std::int64_t{stats_[t].error_points} + stats_[u].error_points;
         const std::int64_t limit = incircle(pa, pb, pp, pd) > 0 ? now : now - 1;
-        if (limit < 0) {
+        if (limit < 0 || too_long(pp, pd)) {
             continue;
         }
         const TriangleStats left = scan(p, a, d, limit + 1);
@@ -117,10 +170,170 @@ void Refiner::swap_around(Index p, std::vector<Index>& stack) {
     }
 }
 
+std::int64_t Refiner::longest_edge2(Index t, Index& edge) const {
+    std::int64_t best = -1;
+    for (Index e = 3 * t; e < 3 * t + 3; ++e) {
+        const std::int64_t l2 = length2(tin_.start(e), tin_.points[tin_.triangles[next_edge(e)]]);
+        if (l2 > best) {
+            best = l2;
+            edge = e;
+        }
+    }
+    return best;
+}
+
+bool Refiner::too_long(GridPoint a, GridPoint b) const {
+    return length2(a, b) > max_edge2_floor_;
+}
+
+void Refiner::insert_at(Index t, GridPoint q, std::vector<Index>& stack) {
+    // q lies in the closed triangle t and is no vertex: split t, or the edge q lies on.
+    std::array<Index, 4> around{};
+    Index on_edge = kNone;
+    for (Index e = 3 * t; e < 3 * t + 3; ++e) {
+        if (orient2d(tin_.start(e), tin_.points[tin_.triangles[next_edge(e)]], q) == 0) {
+            on_edge = e;
+        }
+    }
+    const Index p = tin_.add_point(q);
+    int count = 3;
+    if (on_edge == kNone) {
+        tin_.split_triangle(t, p, around);
+    } else {
+        count = tin_.split_edge(on_edge, p, around);
+    }
+    stack.clear();
+    for (int i = 0; i < count; ++i) {
+        const Index tt = around[static_cast<std::size_t>(i)];
+        set_stats(tt, scan(tt));
+        for (Index e = 3 * tt; e < 3 * tt + 3; ++e) {
+            if (tin_.triangles[e] != p && tin_.triangles[next_edge(e)] != p) {
+                stack.push_back(e);
+            }
+        }
+    }
+    swap_around(p, stack);
+}
+
+void Refiner::shorten(Index e, std::vector<Index>& stack) {
+    // e = a -> b is the longest edge of the mesh, over max_edge; t = (a, b, c) and, across e,
+    // u = (b, a, d). Every edge of t and u is at most |ab|.
+    const Index f = tin_.halfedges[e];
+    const GridPoint a = tin_.start(e), b = tin_.points[tin_.triangles[next_edge(e)]];
+    const GridPoint c = tin_.points[tin_.triangles[prev_edge(e)]];
+    // A locked border is the 1-D fit with steps of at most floor(max_edge): never over-long.
+    TB_ASSERT(f != kNone || !lock_border_);
+    const std::int64_t dx = b.x - a.x, dy = b.y - a.y;
+    const std::int64_t g = std::gcd(std::abs(dx), std::abs(dy));
+    if (g >= 2) {
+        // Lattice samples on ab: the one nearest the midpoint, strictly inside the span (an
+        // open edge of a triangulation holds no vertex).
+        const std::int64_t k = g / 2;
+        const GridPoint q{static_cast<std::int32_t>(a.x + dx / g * k),
+                          static_cast<std::int32_t>(a.y + dy / g * k)};
+        insert_at(e / 3, q, stack);
+        return;
+    }
+    // ab holds no sample: take the sample of the closed triangles t and u nearest the
+    // midpoint (doubled coordinates, exact; ties in raster order), other than their vertices.
+    // Samples on a locked border edge stay out (the border must stay the 1-D fit).
+    const GridPoint d = f != kNone ? tin_.points[tin_.triangles[prev_edge(f)]] : c;
+    const Index tris[2] = {e / 3, f != kNone ? f / 3 : kNone};
+    Index best_t = kNone;
+    GridPoint best{};
+    std::int64_t best_d2 = INT64_MAX;
+    for (Index t : tris) {
+        if (t == kNone) {
+            continue;
+        }
+        const GridPoint p0 = tin_.points[tin_.triangles[3 * t]];
+        const GridPoint p1 = tin_.points[tin_.triangles[3 * t + 1]];
+        const GridPoint p2 = tin_.points[tin_.triangles[3 * t + 2]];
+        const std::int32_t x0 = std::min({p0.x, p1.x, p2.x}), x1 = std::max({p0.x, p1.x, p2.x});
+        const std::int32_t y0 = std::min({p0.y, p1.y, p2.y}), y1 = std::max({p0.y, p1.y, p2.y});
+        for (std::int32_t y = y0; y <= y1; ++y) {
+            for (std::int32_t x = x0; x <= x1; ++x) {
+                const GridPoint q{x, y};
+                const std::int64_t w0 = orient2d(p1, p2, q), w1 = orient2d(p2, p0, q),
+                                   w2 = orient2d(p0, p1, q);
+                if (w0 < 0 || w1 < 0 || w2 < 0) {
+                    continue;
+                }
+                if ((q.x == p0.x && q.y == p0.y) || (q.x == p1.x && q.y == p1.y) ||
+                    (q.x == p2.x && q.y == p2.y)) {
+                    continue;
+                }
+                if (lock_border_) {
+                    // On an edge of t without a twin: a border edge.
+                    const std::int64_t w[3] = {w2, w0, w1}; // edge 3t+k runs p_k -> p_k+1
+                    bool on_border = false;
+                    for (Index k = 0; k < 3; ++k) {
+                        if (w[k] == 0 && tin_.halfedges[3 * t + k] == kNone) {
+                            on_border = true;
+                        }
+                    }
+                    if (on_border) {
+                        continue;
+                    }
+                }
+                const std::int64_t mx = 2 * std::int64_t{x} - a.x - b.x;
+                const std::int64_t my = 2 * std::int64_t{y} - a.y - b.y;
+                const std::int64_t d2 = mx * mx + my * my;
+                if (d2 < best_d2 || (d2 == best_d2 && raster_less(q, best))) {
+                    best_d2 = d2;
+                    best = q;
+                    best_t = t;
+                }
+            }
+        }
+    }
+    if (best_t != kNone) {
+        insert_at(best_t, best, stack);
+        return;
+    }
+    // t and u hold no other sample and ab is the longest edge of both: the quadrilateral
+    // a d b c is then strictly convex and |cd| < |ab| (both triangles have doubled area 1, so
+    // c = a + w + i v, d = a - w + j v with v = b - a, det(v, w) = 1, and |ac|, |bc|, |ad|,
+    // |bd| <= |ab| force i + j = 1, hence |cd|^2 < |v|^2 + 4 / |v|^2 and |cd| != |v|).
+    if (f == kNone || orient2d(c, a, d) <= 0 || orient2d(d, b, c) <= 0 ||
+        length2(c, d) >= length2(a, b)) {
+        throw Error("triangulate: internal error: cannot shorten the edge from x=" +
+                    std::to_string(a.x) + " y=" + std::to_string(a.y) + " to x=" +
+                    std::to_string(b.x) + " y=" + std::to_string(b.y));
+    }
+    const Index t = e / 3, u = f / 3;
+    // flip(e): t = (c, a, d), u = (d, b, c).
+    const TriangleStats left = scan(tin_.triangles[prev_edge(e)], tin_.triangles[e],
+                                    tin_.triangles[prev_edge(f)]);
+    const TriangleStats right = scan(tin_.triangles[prev_edge(f)], tin_.triangles[next_edge(e)],
+                                     tin_.triangles[prev_edge(e)]);
+    tin_.flip(e);
+    set_stats(t, left);
+    set_stats(u, right);
+}
+
 void Refiner::split_until_clean() {
     std::vector<Index> stack;
     std::array<Index, 4> around{};
-    while (!queue_.empty()) {
+    for (;;) {
+        if (queue_.empty()) {
+            // Clean: remove the longest over-long edge, if any, then go on splitting.
+            if (long_queue_.empty()) {
+                break;
+            }
+            const auto [l2, minus_t] = long_queue_.top();
+            long_queue_.pop();
+            const auto t = static_cast<Index>(-minus_t);
+            if (t >= tin_.triangle_slots() || !tin_.alive(t)) {
+                continue;
+            }
+            Index e = kNone;
+            if (longest_edge2(t, e) != l2) {
+                continue; // stale: t changed and was pushed again
+            }
+            shorten(e, stack);
+            continue;
+        }
         const QueueEntry top = queue_.top();
         queue_.pop();
         const Index t = top.t;

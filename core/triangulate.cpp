@@ -61,6 +61,12 @@ void validate(const HeightGrid& grid, const TriangulateOptions& options) {
     if (!std::isfinite(options.eps) || options.eps <= 0.0) {
         throw InputError("eps must be finite and > 0, got " + number(options.eps));
     }
+    if (!std::isfinite(options.max_edge) || options.max_edge < 0.0 ||
+        (options.max_edge > 0.0 && options.max_edge < kMinMaxEdge)) {
+        throw InputError("max_edge must be 0 (no limit) or a finite length of at least " +
+                         number(kMinMaxEdge) + " samples, got " + number(options.max_edge) +
+                         " (a grid triangle's diagonal is sqrt(2) samples long)");
+    }
 }
 
 } // namespace
@@ -68,9 +74,10 @@ void validate(const HeightGrid& grid, const TriangulateOptions& options) {
 Mesh triangulate(const HeightGrid& grid, const TriangulateOptions& options) {
     validate(grid, options);
     const double eps = options.eps;
-    Tin start = delaunay_rectangle(grid.width, grid.height, anchor_points(grid, eps));
+    const int max_step = max_step_for(options.max_edge);
+    Tin start = delaunay_rectangle(grid.width, grid.height, anchor_points(grid, eps, max_step));
     start.compact(); // triangles in Z-order, so the split agent's rescans stay local
-    Refiner refiner(grid, eps, options.lock_border, std::move(start));
+    Refiner refiner(grid, eps, options.lock_border, options.max_edge, std::move(start));
     refiner.split_until_clean();
     refiner.compact(); // the merge agent walks the whole mesh: give it locality first
     for (int round = 0; round < kMaxRounds; ++round) {
@@ -86,6 +93,13 @@ Mesh triangulate(const HeightGrid& grid, const TriangulateOptions& options) {
     if (!(err <= eps)) {
         throw Error("triangulate: internal error: mesh misses a sample by " + number(err) +
                     " > eps " + number(eps));
+    }
+    if (options.max_edge > 0.0) {
+        const double longest = longest_edge(mesh);
+        if (!(longest <= options.max_edge)) {
+            throw Error("triangulate: internal error: an edge is " + number(longest) +
+                        " samples long > max_edge " + number(options.max_edge));
+        }
     }
     return mesh;
 }

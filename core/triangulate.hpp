@@ -7,13 +7,22 @@ namespace tb::core {
 struct TriangulateOptions {
     double eps = 1.0;          // vertical bound, same unit as the heights; > 0 and finite
     bool lock_border = true;   // border vertices = optimal 1-D fit of each border (crack-free tiles)
+    // Longest edge allowed, Euclidean length in (column, row) units; 0 = no limit. Otherwise at
+    // least kMinMaxEdge: every lattice triangle has an edge of length >= sqrt(2), and above 1.5
+    // an over-long edge can always be split or swapped away. With lock_border the border
+    // vertices are the optimal 1-D fit with segments of at most floor(max_edge) samples, still
+    // a pure function of the border's samples, eps and max_edge.
+    double max_edge = 0.0;
 };
+
+inline constexpr double kMinMaxEdge = 1.5;
 
 // Contract: grid is at least 2x2, heights finite wherever valid (and finite everywhere: callers
 // fill nodata before meshing), eps > 0 and finite; otherwise throws tb::InputError naming the
 // problem. On return every valid sample lies within eps of the mesh (checked exactly; a
 // violation throws tb::Error), the triangles tile the rectangle exactly once, counter-clockwise,
-// with no T-junction, and the result is deterministic bit for bit.
+// with no T-junction, every edge is at most options.max_edge long (when > 0; max_edge finite
+// and 0 or >= kMinMaxEdge, else InputError), and the result is deterministic bit for bit.
 Mesh triangulate(const HeightGrid& grid, const TriangulateOptions& options);
 
 // Largest |mesh - height| over the valid samples, by exact point location (the guarantee check).
@@ -22,5 +31,8 @@ double max_error(const Mesh& mesh, const HeightGrid& grid);
 // Verifies twin symmetry, CCW orientation, no zero-area triangle, border edges on the grid
 // boundary, and that the triangles' total area equals (W-1)(H-1). Throws tb::Error on failure.
 void check_mesh(const Mesh& mesh, int width, int height);
+
+// Length of the longest triangle edge, in (column, row) units (0 for an empty mesh).
+double longest_edge(const Mesh& mesh);
 
 }  // namespace tb::core

@@ -15,6 +15,7 @@
 #include "tiler/log.hpp"
 
 #include "core/error.hpp"
+#include "core/triangulate.hpp"
 
 #include <draco/compression/decode.h>
 #include <draco/compression/encode.h>
@@ -257,8 +258,41 @@ ErrorBudget error_budget(double eps) {
     b.eps = eps;
     b.quant_step = s;
     b.quant_error = per_step * s;
-    b.mesh_eps = eps - b.quant_error;
+    b.sag = eps * kSagShare;
+    b.max_edge_m = std::sqrt(6 * kSagRadius * b.sag / kSagMargin);
+    b.mesh_eps = eps - b.quant_error - b.sag;
+    b.drawn_bound = eps;
     TB_ASSERT(b.mesh_eps > 0);
+    return b;
+}
+
+double sample_spacing_m(Scheme scheme, int z, int size) {
+    TB_ASSERT(size >= 1 && z >= 0 && z <= kMaxZoom);
+    constexpr double kA = 6378137.0;
+    constexpr double kPi = 3.14159265358979323846;
+    if (scheme == Scheme::Mercator) {
+        return 2 * kPi * kA / std::ldexp(1.0, z) / size;
+    }
+    constexpr double kF = 1 / 298.257223563;
+    constexpr double kB = kA * (1 - kF);
+    const double tile_deg = 180.0 / std::ldexp(1.0, z); // geodetic tiles are square in degrees
+    return kPi / 180 * (kA * kA / kB) * tile_deg / size;
+}
+
+ErrorBudget tile_error_budget(double eps, Scheme scheme, int z, int size) {
+    ErrorBudget b = error_budget(eps);
+    const double spacing = sample_spacing_m(scheme, z, size);
+    b.max_edge = b.max_edge_m / spacing;
+    if (b.max_edge < core::kMinMaxEdge) {
+        b.max_edge = core::kMinMaxEdge;
+        b.max_edge_m = core::kMinMaxEdge * spacing;
+        b.sag = kSagMargin * b.max_edge_m * b.max_edge_m / (6 * kSagRadius);
+        b.mesh_eps = eps - b.quant_error - b.sag;
+        if (!(b.mesh_eps >= eps / 8)) {
+            b.mesh_eps = eps / 8;
+            b.drawn_bound = b.quant_error + b.sag + b.mesh_eps;
+        }
+    }
     return b;
 }
 

@@ -14,11 +14,34 @@ namespace tb::tiler {
 // The quantization lattice is fixed per eps (so per level): every tile of the level snaps
 // vertices to the same lattice and a shared border vertex decodes identically in both tiles.
 struct ErrorBudget {
-    double eps = 0;         // published bound, metres: decoded mesh vs every valid sample
+    double eps = 0;         // published bound, metres: drawn tile vs every valid sample
     double quant_step = 0;  // lattice step of the Draco position quantization, metres
     double quant_error = 0; // worst vertical displacement quantization can cause, metres
-    double mesh_eps = 0;    // eps handed to core::triangulate = eps - quant_error (> 0)
+    double sag = 0;         // share of eps reserved for the chord sag of straight ECEF triangles
+    double max_edge_m = 0;  // longest ground edge, metres, whose sag stays within `sag`
+    double mesh_eps = 0;    // eps handed to core::triangulate = eps - quant_error - sag (> 0)
+    double max_edge = 0;    // max_edge_m in tile samples (tile_error_budget only; 0 otherwise)
+    // The honest bound of what clients draw: eps, or more where even the shortest edges
+    // allowed sag by more than 7/8 of eps (very coarse zooms; see tile_error_budget).
+    double drawn_bound = 0;
 };
+
+// Chord sag. Clients draw straight triangles between ECEF vertices. Three points of a sphere of
+// radius R span a plane cutting a cap; the plane lies below the sphere by at most
+// R - sqrt(R^2 - r^2) ~ r^2 / (2R) where r is the triangle's circumradius (at the circumcentre
+// when it is inside, i.e. acute: r = L / (2 sin C) <= L / sqrt(3) for the longest edge L, the
+// angle C opposite it being >= 60 degrees, so <= L^2 / (6R)); for an obtuse triangle the depth
+// over the triangle peaks on its longest edge, <= (L/2)^2 / (2R) = L^2 / (8R). So sag <= L^2/(6R)
+// with R = b^2/a = 6335439 m, the smallest radius of curvature of WGS84 (vertices above the
+// ellipsoid only flatten it). The mesher interpolates heights linearly in lon/lat (or
+// mercator) grid space while the drawn triangle is linear in ECEF: the point of the drawn
+// triangle above a sample is also shifted horizontally by up to ~L^2 tan(lat) / (8R) (the
+// chart's metric varies across the triangle), which moves the surface by slope times that.
+// kSagMargin = 2 covers that term for slope * tan(lat) <= 4/3 (slope 1 up to 53 degrees).
+inline constexpr double kSagRadius = 6335439.0;
+inline constexpr double kSagMargin = 2.0;
+// The share of eps reserved for sag.
+inline constexpr double kSagShare = 0.25;
 
 // Steepest mesh triangle (rise over run) for which quant_error is a proven bound. Snapping a
 // vertex moves it by at most s*sqrt(3)/2 in any direction; at a fixed horizontal position the
@@ -27,9 +50,23 @@ struct ErrorBudget {
 // surface against every sample and snaps interior vertices finer where needed.
 inline constexpr double kQuantMaxSlope = 3.0;
 
-// s = the largest power of two with quant_error = (1 + kQuantMaxSlope) * s * sqrt(3)/2 <= eps/8,
-// so the mesher keeps at least 7/8 of eps. Throws InputError unless eps is finite and > 0.
+// s = the largest power of two with quant_error = (1 + kQuantMaxSlope) * s * sqrt(3)/2 <= eps/8;
+// sag = eps * kSagShare and max_edge_m = sqrt(6 R sag / kSagMargin), so the mesher keeps at least
+// 5/8 of eps. Throws InputError unless eps is finite and > 0.
 ErrorBudget error_budget(double eps);
+
+// Ground metres per tile sample, an upper bound that is the same for every tile of zoom z
+// (tile rasters of size + 1 samples per side): geodetic, the degree step times the largest
+// meridian arc per degree (pi/180 * a^2/b; a parallel's arc per degree is never larger);
+// mercator, the EPSG:3857 metre step (never less than the true ground step).
+double sample_spacing_m(Scheme scheme, int z, int size);
+
+// error_budget(eps) for the tiles of zoom z: max_edge = max_edge_m / sample_spacing_m, the same
+// for neighbouring tiles, so their shared borders get identical vertices. Where that is below
+// core::kMinMaxEdge samples (coarse zooms), max_edge is kMinMaxEdge and sag grows to its sag,
+// taken from mesh_eps; where that would leave the mesher less than eps/8, mesh_eps stays eps/8
+// and drawn_bound = quant_error + sag + mesh_eps > eps is what the tileset publishes.
+ErrorBudget tile_error_budget(double eps, Scheme scheme, int z, int size);
 
 // Encodes `mesh` (meshed from `raster` at budget.mesh_eps) as `format`.
 // Positions are snapped to the budget's lattice in double precision (glb: ECEF axes, relative
@@ -58,6 +95,7 @@ struct TilesetSpec {
     double min_height = 0, max_height = 0; // ellipsoidal metres over the whole layer
     std::function<double(int)> eps_for_zoom;
     std::function<bool(const TileId&)> has_tile; // exactly the tiles that make_tile produces
+    int tile_size = 256;                         // N: tile rasters are (N+1) x (N+1) samples
 };
 
 // The layer's documents, by path relative to the layer's URL root: "tileset.json" always,

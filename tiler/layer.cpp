@@ -96,6 +96,7 @@ public:
         spec.min_height = min_height_;
         spec.max_height = max_height_;
         spec.eps_for_zoom = [this](int z) { return eps_for_zoom(z); };
+        spec.tile_size = options_.tile_size;
         spec.has_tile = [this](const TileId& id) { return may_have_tile(id); };
         return tileset_document(spec, path, out);
     }
@@ -120,8 +121,12 @@ public:
     std::string make_tile_at(const TileId& id, Format format, double eps) const override {
         check_eps(eps, "eps");
         const TileRaster raster = make_raster(id);
-        const ErrorBudget budget = error_budget(eps);
-        const core::Mesh mesh = mesh_tile(raster, budget.mesh_eps);
+        // The sag share of eps becomes a longest edge constant over the zoom, so neighbouring
+        // tiles keep identical border vertices.
+        const ErrorBudget budget =
+            tile_error_budget(eps, raster.scheme, raster.id.z, raster.size);
+        const core::Mesh mesh = core::triangulate(
+            raster.grid, core::TriangulateOptions{budget.mesh_eps, true, budget.max_edge});
         return encode_tile(raster, mesh, format, budget);
     }
 

@@ -9,9 +9,10 @@
 // "tilesets/{z}/{x}/{y}.json", which lists that tile and the next 3 levels below it, and so on. A
 // document thus holds at most 85 tiles (+256 references) per root tile.
 //
-// Geometric error of a tile = eps(z) (the published, end-to-end bound incl. quantization) +
-// chord_sag(tile): what a client draws are straight ECEF triangles, which may dip below the
-// height-interpolated surface by that much. The virtual root (no content) holds the min_zoom
+// Geometric error of a tile = eps(z), the published end-to-end bound of what a client draws:
+// quantization and the chord sag of straight ECEF triangles are inside it (error_budget reserves
+// a share of eps for sag and the mesher bounds edge lengths to keep sag within it). The region
+// is padded by the quantization move and that sag. The virtual root (no content) holds the min_zoom
 // tiles; its error is twice its largest child's, the tileset's twice the root's.
 #include "tiler/encode.hpp"
 #include "tiler/geodesy.hpp"
@@ -43,9 +44,11 @@ std::string tile_path(const TileId& id) {
 
 Region tile_region(const TilesetSpec& spec, const TileId& id) {
     const LonLatBox b = tile_bounds(spec.scheme, id);
-    const ErrorBudget budget = error_budget(spec.eps_for_zoom(id.z));
+    const ErrorBudget budget =
+        tile_error_budget(spec.eps_for_zoom(id.z), spec.scheme, id.z, spec.tile_size);
     // Snapping moves a vertex by at most s*sqrt(3)/2 <= s in any direction; straight
-    // triangles sag below their vertices by at most chord_sag.
+    // triangles, no edge longer than max_edge_m, sag below their vertices by at most
+    // budget.sag.
     const double move = budget.quant_step;
     const double dlat = move / kMinRadius;
     const double max_abs_lat = std::max(std::abs(b.south), std::abs(b.north)) * kPi / 180;
@@ -56,13 +59,16 @@ Region tile_region(const TilesetSpec& spec, const TileId& id) {
     r.east = std::min(kPi, b.east * kPi / 180 + dlon);
     r.south = std::max(-kPi / 2, b.south * kPi / 180 - dlat);
     r.north = std::min(kPi / 2, b.north * kPi / 180 + dlat);
-    r.min_h = spec.min_height - move - chord_sag(b);
+    r.min_h = spec.min_height - move - budget.sag;
     r.max_h = spec.max_height + move;
     return r;
 }
 
+// The honest bound of what clients draw: eps(z) itself, chord sag being inside its budget
+// (except at zooms so coarse that one sample step sags by most of eps: then that sag counts).
 double tile_error(const TilesetSpec& spec, const TileId& id) {
-    return spec.eps_for_zoom(id.z) + chord_sag(tile_bounds(spec.scheme, id));
+    return tile_error_budget(spec.eps_for_zoom(id.z), spec.scheme, id.z, spec.tile_size)
+        .drawn_bound;
 }
 
 std::string region_json(const Region& r) {

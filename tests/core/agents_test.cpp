@@ -15,6 +15,7 @@ tb::core::Refiner start(const tb::core::HeightGrid& g, double eps, bool lock) {
         g,
         eps,
         lock,
+        0.0,
         tb::core::delaunay_rectangle(g.width, g.height, tb::core::anchor_points(g, eps)));
 }
 

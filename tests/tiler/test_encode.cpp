@@ -177,7 +177,10 @@ TEST_CASE("error_budget picks the largest power-of-two step whose error stays wi
         CHECK(b.quant_error <= eps / 8);
         CHECK(b.quant_error * 2 > eps / 8); // twice the step would not fit
         CHECK(b.quant_error >= b.quant_step * std::sqrt(3.0) / 2 * (1 + kQuantMaxSlope) * 0.999);
-        CHECK(b.mesh_eps == eps - b.quant_error);
+        CHECK(b.sag == eps * kSagShare);
+        CHECK(b.mesh_eps == eps - b.quant_error - b.sag);
+        CHECK(b.drawn_bound == eps);
+        CHECK(b.max_edge_m == doctest::Approx(std::sqrt(6 * kSagRadius * b.sag / kSagMargin)));
     }
     CHECK_THROWS_AS(error_budget(0.0), InputError);
     CHECK_THROWS_AS(error_budget(-1.0), InputError);

@@ -192,6 +192,7 @@ TEST_CASE("every decoded vertex of a tile lies inside the region the tileset giv
         CAPTURE(z);
         const LonLatBox data{-71.5, 44.0, -71.0, 44.6};
         TilesetSpec spec = make_spec(Scheme::Geodetic, z, z, data, 2.0);
+        spec.tile_size = 32;
         const TileRange range = tiles_covering(spec.scheme, data, z);
         TileRaster r;
         r.id = {z, range.x0, range.y0};
@@ -205,8 +206,9 @@ TEST_CASE("every decoded vertex of a tile lies inside the region the tileset giv
                                                           : float(spec.max_height));
             }
         }
-        const ErrorBudget b = error_budget(spec.eps_for_zoom(z));
-        const core::Mesh mesh = core::triangulate(r.grid, {b.mesh_eps, true});
+        // As the layer meshes it: edges within the zoom's max_edge, so sag within budget.sag.
+        const ErrorBudget b = tile_error_budget(spec.eps_for_zoom(z), spec.scheme, z, r.size);
+        const core::Mesh mesh = core::triangulate(r.grid, {b.mesh_eps, true, b.max_edge});
         const DecodedTile d = decode_glb(encode_tile(r, mesh, Format::Glb, b));
         std::string text;
         REQUIRE(tileset_document(spec, "tileset.json", text));
