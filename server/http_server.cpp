@@ -176,8 +176,10 @@ const char* bad_path(const httplib::Request& req) {
     if (p.find('\0') != std::string::npos || p.find('\\') != std::string::npos) {
         return "the path contains a NUL or backslash";
     }
-    if (contains_ci(req.target, "%2f") || contains_ci(req.target, "%5c") ||
-        contains_ci(req.target, "%00")) {
+    // Only the path part of the raw target: a query string may well carry an encoded '/'.
+    const std::string raw_path = req.target.substr(0, req.target.find('?'));
+    if (contains_ci(raw_path, "%2f") || contains_ci(raw_path, "%5c") ||
+        contains_ci(raw_path, "%00")) {
         return "the path contains an encoded separator or NUL";
     }
     std::size_t begin = 1;

@@ -34,7 +34,13 @@ test('three.js loads a tile as .drc (DRACOLoader) and as .glb (GLTFLoader + DRAC
     const url = `${pages.origin}/web/test-three.html?tile=${encodeURIComponent(tile)}&${pages.query}`;
     t.diagnostic(`page ${url}`);
     await page.goto(url, { waitUntil: 'load' });
-    await page.waitForFunction(() => window.tbThree && window.tbThree.done, null, { timeout: 60000 });
+    try {
+      await page.waitForFunction(() => window.tbThree && window.tbThree.done, null, { timeout: 60000 });
+    } catch (e) {
+      const partial = await page.evaluate(() => window.tbThree || null).catch(() => null);
+      const failed = server.log.split('\n').filter((l) => / [45]\d\d \d+ B /.test(l)).slice(-10).join('\n');
+      throw new Error(`three.js page did not finish: ${e.message}\nstate ${JSON.stringify(partial)}\n${describeRecord(record)}\nserver 4xx/5xx:\n${failed}`);
+    }
     const state = await page.evaluate(() => window.tbThree);
     t.diagnostic(`${tile}: ${JSON.stringify(state)}`);
     assert.equal(state.error, null, `three.js page error: ${state.error}\n${describeRecord(record)}`);

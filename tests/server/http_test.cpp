@@ -324,6 +324,7 @@ TEST_CASE("hostile and malformed URLs get 4xx JSON errors and the server keeps s
              ".glb",
          200}, // repeated slashes are merged
         {"//hills//tileset.json", 200},
+        {"/hills/tileset.json?from=a%2Fb", 200}, // an encoded '/' in the query is no separator
         {tile_url(f.inside) + "?eps=7", 400},
         {tile_url(f.inside) + "?eps=-1", 400},
         {tile_url(f.inside) + "?eps=fine", 400},
