@@ -38,7 +38,8 @@ int main(int argc, char** argv) {
     const int runs = argc > 3 ? std::max(1, std::atoi(argv[3])) : 3;
     const tiler::TileRange range = layer->tiles_at(z);
     const double eps = layer->eps_for_zoom(z);
-    const tiler::ErrorBudget budget = tiler::error_budget(eps);
+    const tiler::ErrorBudget budget =
+        tiler::tile_error_budget(eps, layer->options().scheme, z, layer->options().tile_size);
 
     struct Run {
         double read = 0, mesh = 0, encode = 0, total = 0;
@@ -55,7 +56,7 @@ int main(int argc, char** argv) {
                 const tiler::TileRaster raster = layer->make_raster({z, x, y});
                 r.read += seconds_since(t);
                 t = Clock::now();
-                const core::Mesh mesh = tiler::mesh_tile(raster, budget.mesh_eps);
+                const core::Mesh mesh = tiler::mesh_tile(raster, budget);
                 r.mesh += seconds_since(t);
                 t = Clock::now();
                 const std::string bytes =

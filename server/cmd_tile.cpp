@@ -71,10 +71,12 @@ int run(const Args& args) {
                 << " void";
     } else if (ext == "obj") {
         const tiler::TileRaster raster = layer->make_raster(id);
-        const core::Mesh mesh = tiler::mesh_tile(raster, eps);
+        const tiler::ErrorBudget budget =
+            tiler::tile_error_budget(eps, raster.scheme, raster.id.z, raster.size);
+        const core::Mesh mesh = tiler::mesh_tile(raster, budget);
         tiler::write_file_atomically(*out, tiler::mesh_to_obj(mesh));
         summary << mesh.points.size() << " vertices, " << mesh.triangle_count()
-                << " triangles, eps " << eps << " m";
+                << " triangles, eps " << eps << " m (mesh " << budget.mesh_eps << " m)";
     } else {
         const auto format = *tiler::parse_format(ext);
         const std::string bytes = layer->make_tile_at(id, format, eps);

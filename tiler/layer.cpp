@@ -125,9 +125,7 @@ public:
         // tiles keep identical border vertices.
         const ErrorBudget budget =
             tile_error_budget(eps, raster.scheme, raster.id.z, raster.size);
-        const core::Mesh mesh = core::triangulate(
-            raster.grid, core::TriangulateOptions{budget.mesh_eps, true, budget.max_edge});
-        return encode_tile(raster, mesh, format, budget);
+        return encode_tile(raster, mesh_tile(raster, budget), format, budget);
     }
 
     double min_height() const override { return min_height_; }
@@ -326,8 +324,9 @@ void check_eps(double eps, const std::string& what) {
     }
 }
 
-core::Mesh mesh_tile(const TileRaster& raster, double mesh_eps) {
-    return core::triangulate(raster.grid, core::TriangulateOptions{mesh_eps, true});
+core::Mesh mesh_tile(const TileRaster& raster, const ErrorBudget& budget) {
+    return core::triangulate(raster.grid,
+                             core::TriangulateOptions{budget.mesh_eps, true, budget.max_edge});
 }
 
 std::string mesh_to_obj(const core::Mesh& mesh) {

@@ -2,6 +2,7 @@
 // A layer: one or more DEMs published as one tile pyramid. This is what the `tile`, `build`
 // and `serve` commands share: DEM -> tile raster -> mesh -> encoded bytes.
 #include "core/mesh.hpp"
+#include "tiler/encode.hpp"
 #include "tiler/format.hpp"
 #include "tiler/tile_grid.hpp"
 #include "tiler/tile_raster.hpp"
@@ -83,8 +84,9 @@ public:
 // at least 0.001 m (below that, float32 heights cannot honour it).
 void check_eps(double eps, const std::string& what);
 
-// core::triangulate(raster.grid, {mesh_eps, lock_border = true}): the tile mesh.
-core::Mesh mesh_tile(const TileRaster& raster, double mesh_eps);
+// The tile mesh exactly as encoded: core::triangulate(raster.grid) at budget.mesh_eps with
+// locked borders and budget.max_edge (see tile_error_budget).
+core::Mesh mesh_tile(const TileRaster& raster, const ErrorBudget& budget);
 
 // A mesh in grid coordinates as text: OBJ ("v column row height", 1-based "f i j k") or JSON
 // ({"vertices":[x,y,z,...],"triangles":[i,j,k,...]}, 0-based), heights with 9 significant

@@ -384,8 +384,8 @@ TEST_CASE("neighbouring tiles of N44W072.hgt share border samples and border ver
     const TileRaster rn = layer->make_raster(north);
     check_shared_border(ra, re, true);
     check_shared_border(ra, rn, false);
-    const double eps = layer->eps_for_zoom(z);
-    const auto ma = mesh_tile(ra, eps), me = mesh_tile(re, eps), mn = mesh_tile(rn, eps);
+    const ErrorBudget budget = tile_error_budget(layer->eps_for_zoom(z), ra.scheme, z, ra.size);
+    const auto ma = mesh_tile(ra, budget), me = mesh_tile(re, budget), mn = mesh_tile(rn, budget);
     const int n = ra.size;
     CHECK(border_vertices(ma, n, 'E') == border_vertices(me, n, 'W'));
     CHECK(border_vertices(ma, n, 'N') == border_vertices(mn, n, 'S'));
@@ -416,9 +416,10 @@ TEST_CASE("tiles with voids on their shared border fill it identically (N46E008.
         check_shared_border(previous, next, true);
         if (voids) {
             ++borders_with_voids;
-            const double eps = layer->eps_for_zoom(z);
-            CHECK(border_vertices(mesh_tile(previous, eps), next.size, 'E') ==
-                  border_vertices(mesh_tile(next, eps), next.size, 'W'));
+            const ErrorBudget budget =
+                tile_error_budget(layer->eps_for_zoom(z), next.scheme, z, next.size);
+            CHECK(border_vertices(mesh_tile(previous, budget), next.size, 'E') ==
+                  border_vertices(mesh_tile(next, budget), next.size, 'W'));
         }
         previous = std::move(next);
     }
