@@ -271,6 +271,21 @@
     viewer.camera.setView({ destination: Cesium.Rectangle.fromDegrees(west, south, east, north) });
     scene.requestRender();
   };
+  // Looks straight down on lon/lat from `height` metres above the ellipsoid.
+  tb.lookDown = (lon, lat, height) => {
+    viewer.camera.setView({
+      destination: Cesium.Cartesian3.fromDegrees(lon, lat, height),
+      orientation: { heading: 0, pitch: -Cesium.Math.PI_OVER_TWO, roll: 0 },
+    });
+    scene.requestRender();
+  };
+  // The distance below which CesiumJS refines a tile of this geometricError: where its
+  // screen-space error reaches the tileset's maximumScreenSpaceError.
+  tb.refineDistance = (geometricError) => {
+    const fovy = viewer.camera.frustum.fovy;
+    const sse = tb.tileset ? tb.tileset.maximumScreenSpaceError : 16;
+    return geometricError * scene.drawingBufferHeight / (sse * 2 * Math.tan(fovy / 2));
+  };
   tb.setTilesetShown = (shown) => {
     if (tb.tileset) tb.tileset.show = shown;
     scene.requestRender();

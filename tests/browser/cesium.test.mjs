@@ -72,16 +72,16 @@ test('CesiumJS loads the tileset from terrabound with no failed tile or console 
     assert.ok(o.share > 0.10, `terrain covers only ${(o.share * 100).toFixed(1)} % of the screen`);
     const levelBefore = maxLevel(overview.levels);
 
-    // Closer: straight down on the middle quarter of the finest tile with the most relief, near
-    // enough for CesiumJS's default screen-space error (16 px) to refine below the overview.
+    // Closer: straight down on the centre of the finest tile with the most relief, at half the
+    // distance below which CesiumJS must refine the overview's tiles (their geometricError is
+    // their eps), measured from the top of that tile's region.
     const relief = await pickReliefTile(server.url, overview.layer.name);
-    const [w, s, e, n] = relief.region.slice(0, 4).map((r) => r * 180 / Math.PI);
-    const qx = (e - w) / 8;
-    const qy = (n - s) / 8;
-    const cx = (w + e) / 2;
-    const cy = (s + n) / 2;
-    t.diagnostic(`close view: middle of ${relief.path}`);
-    await page.evaluate(([a, b, c, d]) => window.tb.viewRectangle(a, b, c, d), [cx - qx, cy - qy, cx + qx, cy + qy]);
+    const [w, s, e, n, , maxH] = relief.region;
+    const cx = (w + e) / 2 * 180 / Math.PI;
+    const cy = (s + n) / 2 * 180 / Math.PI;
+    const d = await page.evaluate((ge) => window.tb.refineDistance(ge), overview.screen.maxGeometricError);
+    t.diagnostic(`close view: centre of ${relief.path}, ${(d / 2).toFixed(0)} m above its highest point`);
+    await page.evaluate(([a, b, h]) => window.tb.lookDown(a, b, h), [cx, cy, maxH + d / 2]);
     const second = await page.evaluate(() => window.tb.waitLoaded(90000));
     const close = await page.evaluate(() => ({ levels: { ...window.tb.loadedLevels }, failed: window.tb.failed, screen: window.tb.screen }));
     t.diagnostic(`close view: ${second.loadedTiles} tiles total, levels ${JSON.stringify(close.levels)}, on screen ${JSON.stringify(close.screen)}`);
