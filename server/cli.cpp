@@ -47,6 +47,15 @@ long long to_int(const std::string& text, const std::string& what) {
     return v;
 }
 
+std::string extension_of(const std::string& path) {
+    const auto slash = path.find_last_of('/');
+    const auto dot = path.find_last_of('.');
+    if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) {
+        return "";
+    }
+    return path.substr(dot + 1);
+}
+
 Args parse(const CommandSpec& spec, const std::vector<std::string>& argv) {
     Args args;
     for (std::size_t i = 0; i < argv.size(); ++i) {

@@ -42,4 +42,7 @@ std::string help_text(const CommandSpec& spec);
 double to_double(const std::string& text, const std::string& what);
 long long to_int(const std::string& text, const std::string& what);
 
+// The extension of a path's file name without the dot ("out.glb" -> "glb"), or "".
+std::string extension_of(const std::string& path);
+
 }  // namespace tb::cli

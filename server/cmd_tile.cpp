@@ -14,15 +14,6 @@
 namespace tb::cli {
 namespace {
 
-std::string extension_of(const std::string& path) {
-    const auto slash = path.find_last_of('/');
-    const auto dot = path.find_last_of('.');
-    if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) {
-        return "";
-    }
-    return path.substr(dot + 1);
-}
-
 int run(const Args& args) {
     if (args.positional.size() < 4) {
         throw InputError("tile: expected INPUT... Z X Y; see 'terrabound tile --help'");

@@ -2,6 +2,7 @@
 // at the global lattice of a zoom, one GDAL handle per concurrent reader.
 #include "core/error.hpp"
 #include "tiler/gdal_source.hpp"
+#include "tiler/layer.hpp"
 #include "tiler/log.hpp"
 
 #include <cpl_conv.h>
@@ -572,13 +573,7 @@ void write_tile_raster_tiff(const TileRaster& raster, const std::string& path) {
         std::remove(temp.c_str());
         throw IoError(path + ": write failed (" + gdal_message() + ")");
     }
-    std::error_code ec;
-    std::filesystem::rename(temp, path, ec);
-    if (ec) {
-        std::remove(temp.c_str());
-        throw IoError(path + ": cannot rename the temporary file into place (" + ec.message() +
-                      ")");
-    }
+    move_into_place(temp, path);
 }
 
 FloatGrid read_float_grid(const std::string& path) {

@@ -391,6 +391,10 @@ void write_file_atomically(const std::string& path, std::string_view bytes) {
             throw IoError(path + ": write failed (" + std::strerror(errno) + ")");
         }
     }
+    move_into_place(temp, path);
+}
+
+void move_into_place(const std::string& temp, const std::string& path) {
     std::error_code ec;
     std::filesystem::rename(temp, path, ec);
     if (ec) {

@@ -97,6 +97,9 @@ std::string mesh_to_json(const core::Mesh& mesh);
 // Writes `bytes` to a temporary file next to `path`, then renames it over `path`, so a reader
 // never sees a half-written file. Throws IoError naming the path.
 void write_file_atomically(const std::string& path, std::string_view bytes);
+// The last step of such a write: renames the finished `temp` over `path`, removing `temp` and
+// throwing IoError naming `path` if that fails.
+void move_into_place(const std::string& temp, const std::string& path);
 
 VerticalDatum parse_datum(const std::string& name); // "auto" | "egm96" | "ellipsoid"
 const char* to_string(VerticalDatum datum);
