@@ -60,14 +60,6 @@ int flatness_class(double deviation) {
     return exponent;
 }
 
-std::uint64_t z_order(GridPoint p) {
-    std::uint64_t out = 0;
-    for (int b = 0; b < 21; ++b) {
-        out |= ((static_cast<std::uint64_t>(p.x) >> b) & 1u) << (2 * b);
-        out |= ((static_cast<std::uint64_t>(p.y) >> b) & 1u) << (2 * b + 1);
-    }
-    return out;
-}
 
 } // namespace
 
@@ -396,7 +388,7 @@ std::size_t Refiner::merge_pass() {
     std::vector<Candidate> order;
     for (Index v : todo) {
         order.push_back(
-            {flatness_class(deviation[v]), error_points[v], z_order(tin_.points[v]), v});
+            {flatness_class(deviation[v]), error_points[v], z_order_key(tin_.points[v]), v});
     }
     std::sort(order.begin(), order.end());
     std::size_t removed = 0;

@@ -200,6 +200,9 @@ void Refiner::insert_at(Index t, GridPoint q, std::vector<Index>& stack) {
     if (on_edge == kNone) {
         tin_.split_triangle(t, p, around);
     } else {
+        // A locked border is the exact 1-D fit: its samples are never error points, and the
+        // edge-shortening pass skips them.
+        TB_ASSERT(!lock_border_ || tin_.halfedges[on_edge] != kNone);
         count = tin_.split_edge(on_edge, p, around);
     }
     stack.clear();
@@ -314,7 +317,6 @@ void Refiner::shorten(Index e, std::vector<Index>& stack) {
 
 void Refiner::split_until_clean() {
     std::vector<Index> stack;
-    std::array<Index, 4> around{};
     for (;;) {
         if (queue_.empty()) {
             // Clean: remove the longest over-long edge, if any, then go on splitting.
@@ -344,32 +346,7 @@ void Refiner::split_until_clean() {
         TB_ASSERT(s >= 0);
         const GridPoint q{static_cast<std::int32_t>(s % grid_.width),
                           static_cast<std::int32_t>(s / grid_.width)};
-        Index on_edge = kNone;
-        for (Index e = 3 * t; e < 3 * t + 3; ++e) {
-            if (orient2d(tin_.start(e), tin_.points[tin_.triangles[next_edge(e)]], q) == 0) {
-                on_edge = e;
-            }
-        }
-        const Index p = tin_.add_point(q);
-        int count = 3;
-        if (on_edge == kNone) {
-            tin_.split_triangle(t, p, around);
-        } else {
-            // A locked border is the exact 1-D fit: its samples are never error points.
-            TB_ASSERT(!lock_border_ || tin_.halfedges[on_edge] != kNone);
-            count = tin_.split_edge(on_edge, p, around);
-        }
-        stack.clear();
-        for (int i = 0; i < count; ++i) {
-            const Index tt = around[static_cast<std::size_t>(i)];
-            set_stats(tt, scan(tt));
-            for (Index e = 3 * tt; e < 3 * tt + 3; ++e) {
-                if (tin_.triangles[e] != p && tin_.triangles[next_edge(e)] != p) {
-                    stack.push_back(e);
-                }
-            }
-        }
-        swap_around(p, stack);
+        insert_at(t, q, stack);
     }
     TB_ASSERT(error_points_ == 0);
 }

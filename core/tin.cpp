@@ -178,8 +178,6 @@ bool Tin::on_border(Index v) const {
     return halfedges[r.front()] == kNone;
 }
 
-namespace {
-
 std::uint64_t z_order_key(GridPoint p) {
     std::uint64_t out = 0;
     for (int b = 0; b < 21; ++b) {
@@ -188,8 +186,6 @@ std::uint64_t z_order_key(GridPoint p) {
     }
     return out;
 }
-
-} // namespace
 
 std::vector<Index> Tin::compact() {
     // Vertices by the Z-order of their position (unique, so the order is total).

@@ -71,4 +71,7 @@ struct Tin {
     Mesh to_mesh(const std::vector<float>& heights, int width) const;
 };
 
+// Position of p on the Z-order (Morton) curve: a locality-preserving order for ties.
+std::uint64_t z_order_key(GridPoint p);
+
 } // namespace tb::core
