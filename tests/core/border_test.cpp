@@ -10,24 +10,13 @@
 
 #include "core/breakpoints.hpp"
 #include "core/triangulate.hpp"
+#include "tests/core/brute_force.hpp"
 #include "tests/core/linf_oracle.hpp"
 #include "tests/core/terrains.hpp"
 
 namespace {
 
 using tb::core::HeightGrid;
-
-HeightGrid window(const HeightGrid& g, int x0, int y0, int w, int h) {
-    HeightGrid out;
-    out.width = w;
-    out.height = h;
-    for (int y = y0; y < y0 + h; ++y) {
-        for (int x = x0; x < x0 + w; ++x) {
-            out.heights.push_back(g.at(x, y));
-        }
-    }
-    return out;
-}
 
 // Positions along column x (rows) or row y (columns) of the mesh's vertices on that line.
 std::vector<int> on_column(const tb::core::Mesh& m, int x) {
@@ -53,9 +42,9 @@ std::vector<int> on_row(const tb::core::Mesh& m, int y) {
 
 void check_neighbours(const HeightGrid& g, int size, double eps) {
     // Left/right windows share column `size - 1`; top/bottom windows share row `size - 1`.
-    const HeightGrid left = window(g, 0, 0, size, size);
-    const HeightGrid right = window(g, size - 1, 0, size, size);
-    const HeightGrid below = window(g, 0, size - 1, size, size);
+    const HeightGrid left = brute::window(g, 0, 0, size, size);
+    const HeightGrid right = brute::window(g, size - 1, 0, size, size);
+    const HeightGrid below = brute::window(g, 0, size - 1, size, size);
     const tb::core::TriangulateOptions opt{.eps = eps, .lock_border = true};
     const auto ml = tb::core::triangulate(left, opt);
     const auto mr = tb::core::triangulate(right, opt);
@@ -100,6 +89,6 @@ TEST_CASE("neighbouring windows of the real DEM N44W072.hgt share border vertice
         const auto v = static_cast<std::int16_t>((raw[2 * i] << 8) | raw[2 * i + 1]);
         g.heights[i] = static_cast<float>(v);
     }
-    const HeightGrid part = window(g, 400, 400, 257, 257);
+    const HeightGrid part = brute::window(g, 400, 400, 257, 257);
     check_neighbours(part, 129, 10.0);
 }

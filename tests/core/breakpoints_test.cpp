@@ -7,57 +7,8 @@
 
 #include "core/breakpoints.hpp"
 #include "core/triangulate.hpp"
+#include "tests/core/brute_force.hpp"
 #include "tests/core/terrains.hpp"
-
-namespace {
-
-// Independent tunnel test: every valid sample between i and j within eps of the segment,
-// in long double from the raw heights.
-bool fits(
-    const std::vector<float>& z, const std::vector<std::uint8_t>& valid, double eps, int i, int j) {
-    for (int k = i + 1; k < j; ++k) {
-        if (!valid.empty() && valid[static_cast<std::size_t>(k)] == 0) {
-            continue;
-        }
-        const long double t = static_cast<long double>(k - i) / (j - i);
-        const long double line =
-            z[static_cast<std::size_t>(i)] * (1 - t) + z[static_cast<std::size_t>(j)] * t;
-        if (std::abs(line - z[static_cast<std::size_t>(k)]) > eps) {
-            return false;
-        }
-    }
-    return true;
-}
-
-// Fewest breakpoints over all subsets containing both ends.
-int brute_force_count(const std::vector<float>& z,
-                      const std::vector<std::uint8_t>& valid,
-                      double eps) {
-    const int n = static_cast<int>(z.size());
-    int best = n;
-    for (std::uint32_t mask = 0; mask < (1u << (n - 2)); ++mask) {
-        std::vector<int> pts{0};
-        for (int k = 1; k < n - 1; ++k) {
-            if (mask & (1u << (k - 1))) {
-                pts.push_back(k);
-            }
-        }
-        pts.push_back(n - 1);
-        if (static_cast<int>(pts.size()) >= best) {
-            continue;
-        }
-        bool ok = true;
-        for (std::size_t s = 1; s < pts.size() && ok; ++s) {
-            ok = fits(z, valid, eps, pts[s - 1], pts[s]);
-        }
-        if (ok) {
-            best = static_cast<int>(pts.size());
-        }
-    }
-    return best;
-}
-
-} // namespace
 
 TEST_CASE("the 1-D fit has the brute-force optimal count on random sequences (seeds 1-300)") {
     for (std::uint64_t seed = 1; seed <= 300; ++seed) {
@@ -80,9 +31,9 @@ TEST_CASE("the 1-D fit has the brute-force optimal count on random sequences (se
         REQUIRE(chain.back() == n - 1);
         for (std::size_t s = 1; s < chain.size(); ++s) {
             CHECK(chain[s - 1] < chain[s]);
-            CHECK(fits(z, valid, eps, chain[s - 1], chain[s]));
+            CHECK(brute::fits(z, valid, eps, chain[s - 1], chain[s]));
         }
-        CHECK(static_cast<int>(chain.size()) == brute_force_count(z, valid, eps));
+        CHECK(static_cast<int>(chain.size()) == brute::optimal_breakpoints(z, valid, eps));
     }
 }
 
@@ -111,7 +62,7 @@ TEST_CASE("a fit where the farthest first hop is not optimal still finds the opt
     for (double eps : {0.4, 0.9, 1.3, 2.2}) {
         INFO("eps=", eps);
         CHECK(static_cast<int>(tb::core::fit_breakpoints(z, all, eps).size()) ==
-              brute_force_count(z, all, eps));
+              brute::optimal_breakpoints(z, all, eps));
     }
 }
 

@@ -11,6 +11,7 @@
 #include "core/breakpoints.hpp"
 #include "core/error.hpp"
 #include "core/triangulate.hpp"
+#include "tests/core/brute_force.hpp"
 #include "tests/core/linf_oracle.hpp"
 #include "tests/core/terrains.hpp"
 
@@ -44,56 +45,6 @@ void check_all(const HeightGrid& g, double eps, bool lock, double max_edge) {
     CHECK_NOTHROW(tb::core::check_mesh(m, g.width, g.height));
 }
 
-// Independent tunnel test in long double.
-bool fits(const std::vector<float>& z, double eps, int i, int j) {
-    for (int k = i + 1; k < j; ++k) {
-        const long double t = static_cast<long double>(k - i) / (j - i);
-        const long double line =
-            z[static_cast<std::size_t>(i)] * (1 - t) + z[static_cast<std::size_t>(j)] * t;
-        if (std::abs(line - z[static_cast<std::size_t>(k)]) > eps) {
-            return false;
-        }
-    }
-    return true;
-}
-
-int brute_force_count(const std::vector<float>& z, double eps, int max_step) {
-    const int n = static_cast<int>(z.size());
-    int best = n;
-    for (std::uint32_t mask = 0; mask < (1u << (n - 2)); ++mask) {
-        std::vector<int> pts{0};
-        for (int k = 1; k < n - 1; ++k) {
-            if (mask & (1u << (k - 1))) {
-                pts.push_back(k);
-            }
-        }
-        pts.push_back(n - 1);
-        if (static_cast<int>(pts.size()) >= best) {
-            continue;
-        }
-        bool ok = true;
-        for (std::size_t s = 1; s < pts.size() && ok; ++s) {
-            ok = pts[s] - pts[s - 1] <= max_step && fits(z, eps, pts[s - 1], pts[s]);
-        }
-        if (ok) {
-            best = static_cast<int>(pts.size());
-        }
-    }
-    return best;
-}
-
-HeightGrid window(const HeightGrid& g, int x0, int y0, int w, int h) {
-    HeightGrid out;
-    out.width = w;
-    out.height = h;
-    for (int y = y0; y < y0 + h; ++y) {
-        for (int x = x0; x < x0 + w; ++x) {
-            out.heights.push_back(g.at(x, y));
-        }
-    }
-    return out;
-}
-
 std::vector<int> on_column(const Mesh& m, int x) {
     std::vector<int> out;
     for (const auto& p : m.points) {
@@ -119,10 +70,10 @@ TEST_CASE("the 1-D fit with a longest step has the brute-force optimal count (se
         const int max_step = 1 + static_cast<int>(r.next() * 5);
         INFO("seed=", seed, " n=", n, " eps=", eps, " max_step=", max_step);
         const auto chain = tb::core::fit_breakpoints(z, {}, eps, max_step);
-        CHECK(static_cast<int>(chain.size()) == brute_force_count(z, eps, max_step));
+        CHECK(static_cast<int>(chain.size()) == brute::optimal_breakpoints(z, {}, eps, max_step));
         for (std::size_t s = 1; s < chain.size(); ++s) {
             CHECK(chain[s] - chain[s - 1] <= max_step);
-            CHECK(fits(z, eps, chain[s - 1], chain[s]));
+            CHECK(brute::fits(z, {}, eps, chain[s - 1], chain[s]));
         }
     }
 }
@@ -172,8 +123,17 @@ TEST_CASE("edge bound, L-infinity bound and exact tiling hold over terrains, mas
                 for (double eps : {0.5, 6.0}) {
                     for (double max_edge : {1.5, 3.2, 9.0}) {
                         for (bool lock : {true, false}) {
-                            INFO(kind, " seed=", seed, " masked=", masked, " eps=", eps,
-                                 " max_edge=", max_edge, " lock=", lock);
+                            INFO(kind,
+                                 " seed=",
+                                 seed,
+                                 " masked=",
+                                 masked,
+                                 " eps=",
+                                 eps,
+                                 " max_edge=",
+                                 max_edge,
+                                 " lock=",
+                                 lock);
                             check_all(g, eps, lock, max_edge);
                         }
                     }
@@ -190,13 +150,14 @@ TEST_CASE("neighbouring windows share identical border vertices under max_edge")
         for (double max_edge : {5.0, 12.5}) {
             INFO("eps=", eps, " max_edge=", max_edge);
             const TriangulateOptions opt{eps, true, max_edge};
-            const HeightGrid left = window(g, 0, 0, size, size);
-            const HeightGrid right = window(g, size - 1, 0, size, size);
+            const HeightGrid left = brute::window(g, 0, 0, size, size);
+            const HeightGrid right = brute::window(g, size - 1, 0, size, size);
             const Mesh ml = tb::core::triangulate(left, opt);
             const Mesh mr = tb::core::triangulate(right, opt);
             const auto shared = on_column(ml, size - 1);
             CHECK(shared == on_column(mr, 0));
-            CHECK(shared == tb::core::border_breakpoints(left, eps, 3, tb::core::max_step_for(max_edge)));
+            CHECK(shared ==
+                  tb::core::border_breakpoints(left, eps, 3, tb::core::max_step_for(max_edge)));
             for (std::size_t s = 1; s < shared.size(); ++s) {
                 CHECK(shared[s] - shared[s - 1] <= static_cast<int>(max_edge));
             }
