@@ -42,8 +42,7 @@ std::vector<GridPoint> anchor_points(const HeightGrid& grid, double eps, int max
 
 // The breakpoints of one border: side 0 = top row (y = 0), 1 = bottom row, 2 = left column
 // (x = 0), 3 = right column; positions along the border.
-std::vector<int>
-border_breakpoints(const HeightGrid& grid, double eps, int side, int max_step = 0);
+std::vector<int> border_breakpoints(const HeightGrid& grid, double eps, int side, int max_step = 0);
 
 // The longest 1-D step an edge bound allows: floor(max_edge), at least 1; 0 for no bound
 // (max_edge == 0). Along a border or scan line an edge of j - i samples has length j - i.

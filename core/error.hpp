@@ -18,7 +18,7 @@ struct NotFound : Error {
 struct IoError : Error {
     using Error::Error;
 };
-}  // namespace tb
+} // namespace tb
 
 // Caller-contract checks: live unless NDEBUG (tests build with asserts on).
 #ifdef NDEBUG
@@ -28,6 +28,6 @@ struct IoError : Error {
 #include <cstdlib>
 #define TB_ASSERT(cond)                                                                            \
     ((cond) ? (void)0                                                                              \
-            : (std::fprintf(stderr, "%s:%d: assertion failed: %s\n", __FILE__, __LINE__, #cond),  \
+            : (std::fprintf(stderr, "%s:%d: assertion failed: %s\n", __FILE__, __LINE__, #cond),   \
                std::abort()))
 #endif

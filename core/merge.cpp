@@ -60,7 +60,6 @@ int flatness_class(double deviation) {
     return exponent;
 }
 
-
 } // namespace
 
 bool Refiner::try_remove(Index v, std::vector<Index>& ring) {

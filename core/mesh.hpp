@@ -34,15 +34,19 @@ struct HeightGrid {
 // t = e / 3 has half-edges 3t, 3t+1, 3t+2 (counter-clockwise in (x, y) with y pointing up the
 // rows, i.e. positive signed area in (x, y)), halfedges[e] is the twin or kNone on the border.
 struct Mesh {
-    std::vector<GridPoint> points;  // vertex v
-    std::vector<float> z;           // height of vertex v, taken exactly from the grid
-    std::vector<Index> triangles;   // half-edge e -> its start vertex
-    std::vector<Index> halfedges;   // twin of e, or kNone on the grid border
+    std::vector<GridPoint> points; // vertex v
+    std::vector<float> z;          // height of vertex v, taken exactly from the grid
+    std::vector<Index> triangles;  // half-edge e -> its start vertex
+    std::vector<Index> halfedges;  // twin of e, or kNone on the grid border
 
     std::size_t triangle_count() const { return triangles.size() / 3; }
 };
 
-inline Index next_edge(Index e) { return e % 3 == 2 ? e - 2 : e + 1; }
-inline Index prev_edge(Index e) { return e % 3 == 0 ? e + 2 : e - 1; }
+inline Index next_edge(Index e) {
+    return e % 3 == 2 ? e - 2 : e + 1;
+}
+inline Index prev_edge(Index e) {
+    return e % 3 == 0 ? e + 2 : e - 1;
+}
 
-}  // namespace tb::core
+} // namespace tb::core

@@ -45,12 +45,8 @@ std::int64_t max_length2(double max_edge) {
 } // namespace
 
 Refiner::Refiner(const HeightGrid& grid, double eps, bool lock_border, double max_edge, Tin tin)
-    : grid_(grid),
-      eps_(eps),
-      lock_border_(lock_border),
-      max_edge_(max_edge),
-      max_edge2_floor_(max_length2(max_edge)),
-      tin_(std::move(tin)) {
+    : grid_(grid), eps_(eps), lock_border_(lock_border), max_edge_(max_edge),
+      max_edge2_floor_(max_length2(max_edge)), tin_(std::move(tin)) {
     for (Index t = 0; t < tin_.triangle_slots(); ++t) {
         if (tin_.alive(t)) {
             set_stats(t, scan(t));
@@ -301,15 +297,15 @@ void Refiner::shorten(Index e, std::vector<Index>& stack) {
     if (f == kNone || orient2d(c, a, d) <= 0 || orient2d(d, b, c) <= 0 ||
         length2(c, d) >= length2(a, b)) {
         throw Error("triangulate: internal error: cannot shorten the edge from x=" +
-                    std::to_string(a.x) + " y=" + std::to_string(a.y) + " to x=" +
-                    std::to_string(b.x) + " y=" + std::to_string(b.y));
+                    std::to_string(a.x) + " y=" + std::to_string(a.y) +
+                    " to x=" + std::to_string(b.x) + " y=" + std::to_string(b.y));
     }
     const Index t = e / 3, u = f / 3;
     // flip(e): t = (c, a, d), u = (d, b, c).
-    const TriangleStats left = scan(tin_.triangles[prev_edge(e)], tin_.triangles[e],
-                                    tin_.triangles[prev_edge(f)]);
-    const TriangleStats right = scan(tin_.triangles[prev_edge(f)], tin_.triangles[next_edge(e)],
-                                     tin_.triangles[prev_edge(e)]);
+    const TriangleStats left =
+        scan(tin_.triangles[prev_edge(e)], tin_.triangles[e], tin_.triangles[prev_edge(f)]);
+    const TriangleStats right = scan(
+        tin_.triangles[prev_edge(f)], tin_.triangles[next_edge(e)], tin_.triangles[prev_edge(e)]);
     tin_.flip(e);
     set_stats(t, left);
     set_stats(u, right);

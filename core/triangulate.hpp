@@ -5,8 +5,8 @@
 namespace tb::core {
 
 struct TriangulateOptions {
-    double eps = 1.0;          // vertical bound, same unit as the heights; > 0 and finite
-    bool lock_border = true;   // border vertices = optimal 1-D fit of each border (crack-free tiles)
+    double eps = 1.0;        // vertical bound, same unit as the heights; > 0 and finite
+    bool lock_border = true; // border vertices = optimal 1-D fit of each border (crack-free tiles)
     // Longest edge allowed, Euclidean length in (column, row) units; 0 = no limit. Otherwise at
     // least kMinMaxEdge: every lattice triangle has an edge of length >= sqrt(2), and above 1.5
     // an over-long edge can always be split or swapped away. With lock_border the border
@@ -35,4 +35,4 @@ void check_mesh(const Mesh& mesh, int width, int height);
 // Length of the longest triangle edge, in (column, row) units (0 for an empty mesh).
 double longest_edge(const Mesh& mesh);
 
-}  // namespace tb::core
+} // namespace tb::core

@@ -81,8 +81,8 @@ Args parse(const CommandSpec& spec, const std::vector<std::string>& argv) {
             }
         }
         if (!option) {
-            throw InputError(spec.name + ": unknown option '" + word +
-                             "'; see 'terrabound " + spec.name + " --help'");
+            throw InputError(spec.name + ": unknown option '" + word + "'; see 'terrabound " +
+                             spec.name + " --help'");
         }
         if (option->value.empty()) {
             if (inline_value) {
@@ -96,8 +96,7 @@ Args parse(const CommandSpec& spec, const std::vector<std::string>& argv) {
         } else if (i + 1 < argv.size()) {
             args.values[name] = argv[++i];
         } else {
-            throw InputError(spec.name + ": --" + name + " needs a value (" +
-                             option->value + ")");
+            throw InputError(spec.name + ": --" + name + " needs a value (" + option->value + ")");
         }
     }
     return args;
@@ -124,4 +123,4 @@ std::string help_text(const CommandSpec& spec) {
     return out.str();
 }
 
-}  // namespace tb::cli
+} // namespace tb::cli

@@ -11,16 +11,16 @@ namespace tb::cli {
 
 struct OptionSpec {
     std::string name;  // without the leading "--"
-    std::string value;  // placeholder shown in help ("E", "PATH"); empty for a flag
+    std::string value; // placeholder shown in help ("E", "PATH"); empty for a flag
     std::string help;
 };
 
 struct CommandSpec {
     std::string name;
-    std::string usage;    // "INPUT --eps E -o OUT"
-    std::string summary;  // one line
+    std::string usage;   // "INPUT --eps E -o OUT"
+    std::string summary; // one line
     std::vector<OptionSpec> options;
-    std::string details;  // extra help text, may be empty
+    std::string details; // extra help text, may be empty
 };
 
 struct Args {
@@ -45,4 +45,4 @@ long long to_int(const std::string& text, const std::string& what);
 // The extension of a path's file name without the dot ("out.glb" -> "glb"), or "".
 std::string extension_of(const std::string& path);
 
-}  // namespace tb::cli
+} // namespace tb::cli

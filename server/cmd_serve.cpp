@@ -32,7 +32,8 @@ std::string find_web_root(const Args& args) {
             return "";
         }
         if (!fs::exists(fs::path(*dir) / "index.html")) {
-            throw InputError("--web " + *dir + ": no index.html there; name the viewer directory "
+            throw InputError("--web " + *dir +
+                             ": no index.html there; name the viewer directory "
                              "(the repository's web/) or 'none'");
         }
         return fs::absolute(*dir).lexically_normal().string();

@@ -9,7 +9,7 @@ namespace tb::cli {
 
 struct Command {
     CommandSpec spec;
-    int (*run)(const Args& args);  // returns the exit code; throws tb::Error on failure
+    int (*run)(const Args& args); // returns the exit code; throws tb::Error on failure
 };
 
 const Command& serve_command();
@@ -18,4 +18,4 @@ const Command& tile_command();
 const Command& mesh_command();
 const Command& info_command();
 
-}  // namespace tb::cli
+} // namespace tb::cli

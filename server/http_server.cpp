@@ -13,8 +13,8 @@
 #include <charconv>
 #include <chrono>
 #include <cstdio>
-#include <mutex>
 #include <fstream>
+#include <mutex>
 #include <sstream>
 
 namespace tb::server {
@@ -454,7 +454,8 @@ struct HttpServer::Impl {
         if (!options.web_root.empty()) {
             // The viewer's static files. cpp-httplib matches mount points before any route and
             // refuses paths that climb out of the directory.
-            for (const auto& [ext, type] : std::initializer_list<std::pair<const char*, const char*>>{
+            for (const auto& [ext, type] :
+                 std::initializer_list<std::pair<const char*, const char*>>{
                      {"js", "text/javascript"},
                      {"mjs", "text/javascript"},
                      {"wasm", "application/wasm"},
@@ -466,11 +467,10 @@ struct HttpServer::Impl {
             if (!server.set_mount_point("/web", options.web_root)) {
                 throw IoError(options.web_root + ": the viewer directory cannot be served");
             }
-            server.set_file_request_handler(
-                [](const httplib::Request&, httplib::Response& res) {
-                    t_request.route = "web";
-                    res.set_header("Cache-Control", "public, max-age=3600");
-                });
+            server.set_file_request_handler([](const httplib::Request&, httplib::Response& res) {
+                t_request.route = "web";
+                res.set_header("Cache-Control", "public, max-age=3600");
+            });
         }
 
         server.Get("/", [this](const httplib::Request& req, httplib::Response& res) {

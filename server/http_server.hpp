@@ -22,7 +22,7 @@ struct HttpOptions {
     int port = 8080; // 0: any free port (see bind())
     std::vector<std::string> cors_origins = {"*"};
     int http_threads = 16; // connection-handling threads
-    std::string web_root;   // the viewer's directory (index.html, node_modules/); empty: none
+    std::string web_root;  // the viewer's directory (index.html, node_modules/); empty: none
 };
 
 // Longest request target accepted; longer ones get 414.

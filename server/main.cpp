@@ -38,7 +38,7 @@ void print_usage(std::FILE* to) {
                  "prints the version.\n");
 }
 
-}  // namespace
+} // namespace
 
 int main(int argc, char** argv) {
     std::vector<std::string> words(argv + 1, argv + argc);

@@ -12,10 +12,12 @@ std::optional<Format> parse_format(std::string_view ext) {
     return std::nullopt;
 }
 
-const char* extension(Format format) { return format == Format::Glb ? "glb" : "drc"; }
+const char* extension(Format format) {
+    return format == Format::Glb ? "glb" : "drc";
+}
 
 const char* media_type(Format format) {
     return format == Format::Glb ? "model/gltf-binary" : "application/octet-stream";
 }
 
-}  // namespace tb::tiler
+} // namespace tb::tiler

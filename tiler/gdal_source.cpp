@@ -28,7 +28,7 @@ std::string last_gdal_error() {
     return message && *message ? message : "unknown GDAL error";
 }
 
-}  // namespace
+} // namespace
 
 void init_gdal() {
     static std::once_flag once;
@@ -55,8 +55,8 @@ DemInfo inspect_dem(const std::string& path) {
         }
     }
     CPLErrorReset();
-    GDALDatasetUniquePtr ds(
-        GDALDataset::Open(path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY | GDAL_OF_VERBOSE_ERROR, nullptr, nullptr));
+    GDALDatasetUniquePtr ds(GDALDataset::Open(
+        path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY | GDAL_OF_VERBOSE_ERROR, nullptr, nullptr));
     if (!ds) {
         throw InputError(path + ": not a raster GDAL can read (" + last_gdal_error() + ")");
     }
@@ -175,4 +175,4 @@ DemInfo inspect_dem(const std::string& path) {
     return info;
 }
 
-}  // namespace tb::tiler
+} // namespace tb::tiler

@@ -123,8 +123,7 @@ public:
         const TileRaster raster = make_raster(id);
         // The sag share of eps becomes a longest edge constant over the zoom, so neighbouring
         // tiles keep identical border vertices.
-        const ErrorBudget budget =
-            tile_error_budget(eps, raster.scheme, raster.id.z, raster.size);
+        const ErrorBudget budget = tile_error_budget(eps, raster.scheme, raster.id.z, raster.size);
         return encode_tile(raster, mesh_tile(raster, budget), format, budget);
     }
 

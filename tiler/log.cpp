@@ -26,10 +26,14 @@ const char* name(Level level) {
     }
     return "?";
 }
-}  // namespace
+} // namespace
 
-void set_level(Level l) { g_level.store(static_cast<int>(l)); }
-Level level() { return static_cast<Level>(g_level.load()); }
+void set_level(Level l) {
+    g_level.store(static_cast<int>(l));
+}
+Level level() {
+    return static_cast<Level>(g_level.load());
+}
 
 bool parse_level(std::string_view n, Level& out) {
     static constexpr std::pair<std::string_view, Level> kNames[] = {
@@ -70,4 +74,4 @@ void write(Level l, std::string_view message) {
     std::fflush(stderr);
 }
 
-}  // namespace tb::log
+} // namespace tb::log

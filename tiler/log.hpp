@@ -9,13 +9,21 @@ enum class Level { Debug = 0, Info = 1, Warn = 2, Error = 3, Off = 4 };
 
 void set_level(Level level);
 Level level();
-bool parse_level(std::string_view name, Level& out);  // "debug" | "info" | "warn" | "error" | "off"
+bool parse_level(std::string_view name, Level& out); // "debug" | "info" | "warn" | "error" | "off"
 
-void write(Level level, std::string_view message);  // thread-safe; whole lines only
+void write(Level level, std::string_view message); // thread-safe; whole lines only
 
-inline void debug(std::string_view m) { write(Level::Debug, m); }
-inline void info(std::string_view m) { write(Level::Info, m); }
-inline void warn(std::string_view m) { write(Level::Warn, m); }
-inline void error(std::string_view m) { write(Level::Error, m); }
+inline void debug(std::string_view m) {
+    write(Level::Debug, m);
+}
+inline void info(std::string_view m) {
+    write(Level::Info, m);
+}
+inline void warn(std::string_view m) {
+    write(Level::Warn, m);
+}
+inline void error(std::string_view m) {
+    write(Level::Error, m);
+}
 
-}  // namespace tb::log
+} // namespace tb::log

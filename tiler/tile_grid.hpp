@@ -27,19 +27,19 @@ struct LonLatBox {
 // Inclusive tile ranges of one zoom.
 struct TileRange {
     int z = 0;
-    std::int64_t x0 = 0, y0 = 0, x1 = -1, y1 = -1;  // empty when x1 < x0
+    std::int64_t x0 = 0, y0 = 0, x1 = -1, y1 = -1; // empty when x1 < x0
     bool empty() const { return x1 < x0 || y1 < y0; }
     std::int64_t count() const { return empty() ? 0 : (x1 - x0 + 1) * (y1 - y0 + 1); }
 };
 
 inline constexpr int kMaxZoom = 24;
 
-Scheme parse_scheme(std::string_view name);  // "geodetic" | "mercator"; InputError otherwise
+Scheme parse_scheme(std::string_view name); // "geodetic" | "mercator"; InputError otherwise
 const char* to_string(Scheme scheme);
 
-std::int64_t tiles_across(Scheme scheme, int z);  // number of columns at zoom z
-std::int64_t tiles_down(Scheme scheme, int z);    // number of rows at zoom z
-bool is_valid(Scheme scheme, const TileId& id);   // 0 <= z <= kMaxZoom, x, y in range
+std::int64_t tiles_across(Scheme scheme, int z); // number of columns at zoom z
+std::int64_t tiles_down(Scheme scheme, int z);   // number of rows at zoom z
+bool is_valid(Scheme scheme, const TileId& id);  // 0 <= z <= kMaxZoom, x, y in range
 
 // Lon/lat bounds of a tile (mercator tiles are converted from EPSG:3857 metres).
 LonLatBox tile_bounds(Scheme scheme, const TileId& id);
@@ -47,4 +47,4 @@ LonLatBox tile_bounds(Scheme scheme, const TileId& id);
 // Tiles of zoom z that intersect a lon/lat box (clamped to the scheme's extent).
 TileRange tiles_covering(Scheme scheme, const LonLatBox& box, int z);
 
-}  // namespace tb::tiler
+} // namespace tb::tiler

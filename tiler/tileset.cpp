@@ -204,10 +204,10 @@ bool tileset_document(const TilesetSpec& spec, const std::string& path, std::str
         // screen-space error exceed any sensible threshold at every distance a view of the
         // layer can have.
         const double region_size =
-            kMinRadius * std::hypot(all.north - all.south,
-                                    (all.east - all.west) *
-                                        std::cos(std::min(std::abs(all.south),
-                                                          std::abs(all.north))));
+            kMinRadius *
+            std::hypot(all.north - all.south,
+                       (all.east - all.west) *
+                           std::cos(std::min(std::abs(all.south), std::abs(all.north))));
         const double root_error = std::max(2 * max_error, region_size);
         std::string root = R"({"boundingVolume":)" + region_json(all) + R"(,"geometricError":)" +
                            number(root_error) + R"(,"refine":"REPLACE","children":[)" + kids + "]}";

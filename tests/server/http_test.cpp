@@ -548,14 +548,14 @@ TEST_CASE("a real SRTM tile is served cold, then from memory with the same bytes
 TEST_CASE("an eps too fine for a big tile is a 400, remembered without remeshing") {
     auto& f = fixture();
     auto options = test::test_layer_options(f.dir / "hills.asc", "hills");
-    options.eps_levels = {0.001};  // far below what a zoom-5 tile's quantization can honour
+    options.eps_levels = {0.001}; // far below what a zoom-5 tile's quantization can honour
     const server::ServedLayer layer{tiler::Layer::open(options), {tiler::Format::Glb}, nullptr};
     RunningServer s({layer});
     auto c = s.client();
     const auto r = layer.layer->tiles_at(5);
     REQUIRE(!r.empty());
-    const std::string url = "/hills/5/" + std::to_string(r.x0) + "/" + std::to_string(r.y0) +
-                            ".glb?eps=0";
+    const std::string url =
+        "/hills/5/" + std::to_string(r.x0) + "/" + std::to_string(r.y0) + ".glb?eps=0";
     auto first = c.Get(url);
     REQUIRE(first);
     CHECK(first->status == 400);

@@ -549,7 +549,7 @@ TEST_CASE("a --bbox build makes only the tiles meeting the box, the same bytes, 
     CHECK_FALSE(fs::exists(dir.path / "part/terrain/tileset.json"));
     const auto whole = dir_tiles(dir.path / "whole", "terrain");
     const auto some = dir_tiles(dir.path / "part", "terrain");
-    CHECK(some.size() >= 3);  // at least one tile per zoom 7..9
+    CHECK(some.size() >= 3); // at least one tile per zoom 7..9
     CHECK(some.size() < whole.size());
     for (const auto& [key, bytes] : some) {
         CAPTURE(key);

@@ -27,9 +27,9 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 
 struct Drawn {
-    double worst = 0;             // largest |drawn - sample| over the valid samples, metres
-    double longest_edge = 0;      // in tile samples
-    std::int64_t samples = 0;     // valid samples measured
+    double worst = 0;         // largest |drawn - sample| over the valid samples, metres
+    double longest_edge = 0;  // in tile samples
+    std::int64_t samples = 0; // valid samples measured
     std::int64_t triangles = 0;
 };
 
@@ -93,8 +93,8 @@ Drawn measure_glb(const std::string& bytes, const TileRaster& raster) {
             for (std::int64_t x = x0; x <= x1; ++x) {
                 const std::int64_t s0 = orient(a, b, x, y), s1 = orient(b, c, x, y),
                                    s2 = orient(c, a, x, y);
-                const bool inside = area > 0 ? (s0 >= 0 && s1 >= 0 && s2 >= 0)
-                                             : (s0 <= 0 && s1 <= 0 && s2 <= 0);
+                const bool inside =
+                    area > 0 ? (s0 >= 0 && s1 >= 0 && s2 >= 0) : (s0 <= 0 && s1 <= 0 && s2 <= 0);
                 if (inside) {
                     owner[static_cast<std::size_t>(y * w + x)] = static_cast<std::int64_t>(t);
                 }
@@ -195,8 +195,8 @@ TEST_CASE("flat ground without the sag budget (the old pipeline) draws below eps
         tb::core::triangulate(raster.grid, tb::core::TriangulateOptions{old.mesh_eps, true});
     CHECK(mesh.triangle_count() == 2);
     const Drawn got = measure_glb(encode_tile(raster, mesh, Format::Glb, old), raster);
-    MESSAGE("old pipeline, tile 10/" << id.x << "/" << id.y << ": eps " << eps
-                                     << " m, worst drawn " << got.worst << " m");
+    MESSAGE("old pipeline, tile 10/" << id.x << "/" << id.y << ": eps " << eps << " m, worst drawn "
+                                     << got.worst << " m");
     CHECK(got.worst > eps);
 }
 
@@ -232,8 +232,7 @@ TEST_CASE("tile_error_budget is constant per zoom and its edge keeps the sag wit
             // The sag of the longest allowed edge, margin included, is within the share.
             CHECK(kSagMargin * b.max_edge_m * b.max_edge_m / (6 * kSagRadius) <=
                   b.sag * (1 + 1e-12));
-            CHECK(b.max_edge * sample_spacing_m(scheme, z, 256) ==
-                  doctest::Approx(b.max_edge_m));
+            CHECK(b.max_edge * sample_spacing_m(scheme, z, 256) == doctest::Approx(b.max_edge_m));
         }
     }
     // A parallel's step is never longer than the meridian step used for geodetic tiles.
