@@ -178,13 +178,25 @@ bool Tin::on_border(Index v) const {
     return halfedges[r.front()] == kNone;
 }
 
+namespace {
+
+// Bit i of the low 21 bits of v moved to bit 2 * i (the classic shift-and-mask spread).
+std::uint64_t spread_bits(std::uint64_t v) {
+    v &= 0x1FFFFFu;
+    v = (v | (v << 16)) & 0x0000FFFF0000FFFFu;
+    v = (v | (v << 8)) & 0x00FF00FF00FF00FFu;
+    v = (v | (v << 4)) & 0x0F0F0F0F0F0F0F0Fu;
+    v = (v | (v << 2)) & 0x3333333333333333u;
+    v = (v | (v << 1)) & 0x5555555555555555u;
+    return v;
+}
+
+} // namespace
+
+// x's bits at even positions, y's at odd ones (coordinates are below 2^21).
 std::uint64_t z_order_key(GridPoint p) {
-    std::uint64_t out = 0;
-    for (int b = 0; b < 21; ++b) {
-        out |= ((static_cast<std::uint64_t>(p.x) >> b) & 1u) << (2 * b);
-        out |= ((static_cast<std::uint64_t>(p.y) >> b) & 1u) << (2 * b + 1);
-    }
-    return out;
+    return spread_bits(static_cast<std::uint32_t>(p.x)) |
+           (spread_bits(static_cast<std::uint32_t>(p.y)) << 1);
 }
 
 std::vector<Index> Tin::compact() {
