@@ -18,28 +18,6 @@ namespace {
 
 using tb::core::HeightGrid;
 
-// Positions along column x (rows) or row y (columns) of the mesh's vertices on that line.
-std::vector<int> on_column(const tb::core::Mesh& m, int x) {
-    std::vector<int> out;
-    for (const auto& p : m.points) {
-        if (p.x == x) {
-            out.push_back(p.y);
-        }
-    }
-    std::sort(out.begin(), out.end());
-    return out;
-}
-std::vector<int> on_row(const tb::core::Mesh& m, int y) {
-    std::vector<int> out;
-    for (const auto& p : m.points) {
-        if (p.y == y) {
-            out.push_back(p.x);
-        }
-    }
-    std::sort(out.begin(), out.end());
-    return out;
-}
-
 void check_neighbours(const HeightGrid& g, int size, double eps) {
     // Left/right windows share column `size - 1`; top/bottom windows share row `size - 1`.
     const HeightGrid left = brute::window(g, 0, 0, size, size);
@@ -52,11 +30,11 @@ void check_neighbours(const HeightGrid& g, int size, double eps) {
     CHECK(oracle::judge(ml, left, eps).over_eps == 0);
     CHECK(oracle::judge(mr, right, eps).over_eps == 0);
     CHECK(oracle::judge(mb, below, eps).over_eps == 0);
-    const auto shared_col = on_column(ml, size - 1);
-    CHECK(shared_col == on_column(mr, 0));
+    const auto shared_col = brute::on_column(ml, size - 1);
+    CHECK(shared_col == brute::on_column(mr, 0));
     CHECK(shared_col == tb::core::border_breakpoints(left, eps, 3));
-    const auto shared_row = on_row(ml, size - 1);
-    CHECK(shared_row == on_row(mb, 0));
+    const auto shared_row = brute::on_row(ml, size - 1);
+    CHECK(shared_row == brute::on_row(mb, 0));
     CHECK(shared_row == tb::core::border_breakpoints(left, eps, 1));
 }
 

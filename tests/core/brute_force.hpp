@@ -1,5 +1,6 @@
 #pragma once
 // Brute-force references for the core tests, sharing no code with core/.
+#include <algorithm>
 #include <climits>
 #include <cmath>
 #include <cstdint>
@@ -67,6 +68,28 @@ inline tb::core::HeightGrid window(const tb::core::HeightGrid& g, int x0, int y0
             out.heights.push_back(g.at(x, y));
         }
     }
+    return out;
+}
+
+// Sorted positions of the mesh's vertices on column x (their rows) or on row y (their columns).
+inline std::vector<int> on_column(const tb::core::Mesh& m, int x) {
+    std::vector<int> out;
+    for (const auto& p : m.points) {
+        if (p.x == x) {
+            out.push_back(p.y);
+        }
+    }
+    std::sort(out.begin(), out.end());
+    return out;
+}
+inline std::vector<int> on_row(const tb::core::Mesh& m, int y) {
+    std::vector<int> out;
+    for (const auto& p : m.points) {
+        if (p.y == y) {
+            out.push_back(p.x);
+        }
+    }
+    std::sort(out.begin(), out.end());
     return out;
 }
 

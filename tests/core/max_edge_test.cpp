@@ -45,17 +45,6 @@ void check_all(const HeightGrid& g, double eps, bool lock, double max_edge) {
     CHECK_NOTHROW(tb::core::check_mesh(m, g.width, g.height));
 }
 
-std::vector<int> on_column(const Mesh& m, int x) {
-    std::vector<int> out;
-    for (const auto& p : m.points) {
-        if (p.x == x) {
-            out.push_back(p.y);
-        }
-    }
-    std::sort(out.begin(), out.end());
-    return out;
-}
-
 } // namespace
 
 TEST_CASE("the 1-D fit with a longest step has the brute-force optimal count (seeds 1-200)") {
@@ -154,8 +143,8 @@ TEST_CASE("neighbouring windows share identical border vertices under max_edge")
             const HeightGrid right = brute::window(g, size - 1, 0, size, size);
             const Mesh ml = tb::core::triangulate(left, opt);
             const Mesh mr = tb::core::triangulate(right, opt);
-            const auto shared = on_column(ml, size - 1);
-            CHECK(shared == on_column(mr, 0));
+            const auto shared = brute::on_column(ml, size - 1);
+            CHECK(shared == brute::on_column(mr, 0));
             CHECK(shared ==
                   tb::core::border_breakpoints(left, eps, 3, tb::core::max_step_for(max_edge)));
             for (std::size_t s = 1; s < shared.size(); ++s) {
