@@ -61,7 +61,27 @@ std::string describe(const tiler::DemInfo& d) {
     return out.str();
 }
 
-// The pyramid a layer of this DEM would have: zooms, tiles per zoom, eps per zoom.
+// What a zoom's tiles read of the source: "full resolution", "every 4th pixel",
+// "overview 2 (1/3.99)", "overview 4 (1/15.9), every 2nd pixel" (overviews numbered from 1).
+std::string describe_read(const tiler::ReadLevel& level) {
+    std::string text;
+    if (level.overview < 0) {
+        text = level.step == 1 ? "full resolution" : "";
+    } else {
+        char factor[32];
+        std::snprintf(factor, sizeof factor, "%.3g", level.factor);
+        text = "overview " + std::to_string(level.overview + 1) + " (1/" + factor + ")";
+    }
+    if (level.step > 1) {
+        const char* suffix = level.step % 10 == 2 && level.step % 100 != 12 ? "nd" : "th";
+        text +=
+            (text.empty() ? "every " : ", every ") + std::to_string(level.step) + suffix + " pixel";
+    }
+    return text;
+}
+
+// The pyramid a layer of this DEM would have: zooms, tiles per zoom, eps per zoom, and what
+// each zoom reads of the source.
 std::string describe_pyramid(const std::string& path, tiler::Scheme scheme) {
     std::ostringstream out;
     out.precision(6);
@@ -75,6 +95,7 @@ std::string describe_pyramid(const std::string& path, tiler::Scheme scheme) {
         out << "  pyramid:     none (" << e.what() << ")\n";
         return out.str();
     }
+    const auto source = tiler::DemSource::open({path});
     const auto& o = layer->options();
     const auto b = layer->data_bounds();
     out << "  pyramid:     " << to_string(o.scheme) << ", " << o.tile_size
@@ -83,18 +104,19 @@ std::string describe_pyramid(const std::string& path, tiler::Scheme scheme) {
         << " .. " << layer->max_height() << " m)\n";
     out << "  footprint:   west " << b.west << ", south " << b.south << ", east " << b.east
         << ", north " << b.north << " (pixel centres)\n";
-    out << "    zoom  tiles       columns x rows      eps (m)\n";
+    out << "    zoom  tiles       columns x rows      eps (m)     reads\n";
     for (int z = layer->min_zoom(); z <= layer->max_zoom(); ++z) {
         const tiler::TileRange r = layer->tiles_at(z);
-        char line[128];
+        char line[192];
         std::snprintf(line,
                       sizeof line,
-                      "    %4d  %-10lld  %8lld x %-8lld  %g\n",
+                      "    %4d  %-10lld  %8lld x %-8lld  %-10g  %s\n",
                       z,
                       static_cast<long long>(r.count()),
                       static_cast<long long>(r.x1 - r.x0 + 1),
                       static_cast<long long>(r.y1 - r.y0 + 1),
-                      layer->eps_for_zoom(z));
+                      layer->eps_for_zoom(z),
+                      describe_read(source->read_level(o.scheme, z, o.tile_size)).c_str());
         out << line;
     }
     return out.str();
@@ -121,7 +143,9 @@ const Command& info_command() {
          "Describe a DEM: size, CRS, data type, nodata, height range, resolution, pyramid.",
          {{"scheme", "NAME", "pyramid plan for geodetic (default) or mercator tiles"}},
          "The pyramid plan is what 'terrabound build' and 'serve' make of the DEM alone with\n"
-         "default options: zoom range, tiles per zoom and each zoom's eps (metres)."},
+         "default options: zoom range, tiles per zoom, each zoom's eps (metres) and what its\n"
+         "tiles read: full resolution, every 2^k-th pixel, or an overview (make them with\n"
+         "'gdaladdo -r average DEM' for fast coarse zooms on a large DEM)."},
         run};
     return command;
 }

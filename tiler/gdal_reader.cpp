@@ -17,6 +17,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <mutex>
+#include <set>
 #include <unistd.h>
 
 namespace tb::tiler {
@@ -64,6 +65,22 @@ void check_band(const std::string& name, GDALDataset& ds) {
     }
 }
 
+// Without overviews each coarse zoom reads every block of the source, which is slow for a large
+// DEM. Said once per source per process (`info` opens it twice, several layers may share it).
+void suggest_overviews(const DemInfo& info, bool mosaic) {
+    static std::mutex mutex;
+    static std::set<std::string> told;
+    std::lock_guard lock(mutex);
+    if (told.insert(info.path).second) {
+        log::info(info.path + ": " + std::to_string(info.width) + " x " +
+                  std::to_string(info.height) +
+                  " pixels and no overviews, so each coarse zoom reads every block of it; run " +
+                  (mosaic ? "'gdaladdo -r average FILE' on each file"
+                          : "'gdaladdo -r average " + info.path + "'") +
+                  " once for fast coarse zooms");
+    }
+}
+
 class GdalDemSource final : public DemSource {
 public:
     GdalDemSource(std::string open_name, DemInfo info)
@@ -86,6 +103,15 @@ public:
         }
         if (georeferenced_) {
             compute_footprint();
+        }
+        for (int k = 0; k < band->GetOverviewCount(); ++k) {
+            GDALRasterBand* overview = band->GetOverview(k);
+            if (overview && overview->GetXSize() > 0 && overview->GetYSize() > 0) {
+                overviews_.push_back({k, overview->GetXSize(), overview->GetYSize()});
+            }
+        }
+        if (overviews_.empty() && static_cast<double>(info_.width) * info_.height > 4096.0 * 4096) {
+            suggest_overviews(info_, open_name_ != info_.path);
         }
         release(std::make_unique<Handle>(Handle{std::move(ds), {}, {}}));
     }
@@ -114,6 +140,22 @@ public:
         return spacing_m / info_.resolution_m;
     }
 
+    ReadLevel read_level(Scheme scheme, int z, int size) const override {
+        const double pps = pixels_per_sample(scheme, z, size);
+        ReadLevel level{-1, info_.width, info_.height, 1.0, 1};
+        for (const auto& o : overviews_) {
+            const double factor = std::max(static_cast<double>(info_.width) / o.width,
+                                           static_cast<double>(info_.height) / o.height);
+            if (factor <= pps && factor > level.factor) {
+                level = {o.index, o.width, o.height, factor, 1};
+            }
+        }
+        while (level.factor * level.step * 2 <= pps && level.step < (1 << 20)) {
+            level.step *= 2;
+        }
+        return level;
+    }
+
     LatticeBlock sample(Scheme scheme,
                         int z,
                         int size,
@@ -125,6 +167,10 @@ public:
     core::HeightGrid read_all() const override;
 
 private:
+    struct Overview {
+        int index = 0, width = 0, height = 0;
+    };
+
     struct Handle {
         GDALDatasetUniquePtr ds;
         // Scheme CRS -> source CRS, created on first use; null = identity.
@@ -245,6 +291,9 @@ private:
     bool has_srs_ = false, georeferenced_ = false, ellipsoidal_ = false;
     std::array<double, 6> inverse_{};
     LonLatBox footprint_;
+    // Band 1's overviews as found at open; read_level() chooses from these alone, so the level
+    // of a zoom is the same for every handle and every block.
+    std::vector<Overview> overviews_;
     mutable std::mutex mutex_;
     mutable std::vector<std::unique_ptr<Handle>> idle_;
 };
@@ -278,19 +327,16 @@ LatticeBlock GdalDemSource::sample(Scheme scheme,
         ct->Transform(static_cast<int>(n), xs.data(), ys.data(), nullptr, ok.data());
     }
 
-    // Reduced view of the source for this zoom: every f-th pixel, f = 2^k <= pixels per
-    // sample, pixel I of the view being source pixel P(I) = min(I f + f/2, W - 1). It depends on
-    // the zoom only, so every tile of the zoom interpolates the same values.
-    const double pps = pixels_per_sample(scheme, z, size);
-    int f = 1;
-    while (f * 2 <= pps && f < (1 << 20)) {
-        f *= 2;
-    }
-    const int W = info_.width, H = info_.height;
+    // The band read at this zoom and its view: every f-th pixel of it, view pixel I being the
+    // band's pixel P(I) = min(I f + f/2, W - 1). The level depends on the zoom only, so every
+    // tile of the zoom interpolates the same values.
+    const ReadLevel level = read_level(scheme, z, size);
+    const int f = level.step, W = level.width, H = level.height;
     const int wr = (W + f - 1) / f, hr = (H + f - 1) / f;
     const auto pick = [f](int i, int limit) { return std::min(i * f + f / 2, limit - 1); };
 
-    // Pixel-centre coordinates (u, v) of each point, and the window of the view they need.
+    // Pixel-centre coordinates (u, v) of each point in the band read, and the window of the
+    // view they need.
     std::vector<double> us(n), vs(n);
     int i_min = wr, i_max = -1, j_min = hr, j_max = -1;
     const auto cell = [f](double u, int count) {
@@ -306,12 +352,17 @@ LatticeBlock GdalDemSource::sample(Scheme scheme,
             ok[k] = 0;
             continue;
         }
-        const double u = t[0] + xs[k] * t[1] + ys[k] * t[2] - 0.5;
-        const double v = t[3] + xs[k] * t[4] + ys[k] * t[5] - 0.5;
+        double u = t[0] + xs[k] * t[1] + ys[k] * t[2] - 0.5;
+        double v = t[3] + xs[k] * t[4] + ys[k] * t[5] - 0.5;
         // Inside the pixel-area extent of the source (half a pixel beyond the outer centres).
-        if (!(u >= -0.5 && u <= W - 0.5 && v >= -0.5 && v <= H - 0.5)) {
+        if (!(u >= -0.5 && u <= info_.width - 0.5 && v >= -0.5 && v <= info_.height - 0.5)) {
             ok[k] = 0;
             continue;
+        }
+        if (level.overview >= 0) {
+            // An overview spans the source's extent with fewer, larger pixels.
+            u = (u + 0.5) * W / info_.width - 0.5;
+            v = (v + 0.5) * H / info_.height - 0.5;
         }
         us[k] = u, vs[k] = v;
         const int i = cell(u, wr), j = cell(v, hr);
@@ -322,10 +373,18 @@ LatticeBlock GdalDemSource::sample(Scheme scheme,
         return out; // no lattice point inside the source
     }
 
-    // Read the window of the view: one RasterIO at full resolution, or one per view row.
+    // Read the window of the view: one RasterIO at the band's resolution, or one per view row.
     const int ww = i_max - i_min + 1, wh = j_max - j_min + 1;
     std::vector<double> view(static_cast<std::size_t>(ww) * wh);
     GDALRasterBand* band = h->ds->GetRasterBand(1);
+    if (level.overview >= 0) {
+        band = band->GetOverview(level.overview);
+        if (!band || band->GetXSize() != W || band->GetYSize() != H) {
+            throw IoError(info_.path + ": overview " + std::to_string(level.overview + 1) +
+                          " of band 1 changed since the DEM was opened; restart so it is "
+                          "opened afresh");
+        }
+    }
     CPLErrorReset();
     if (f == 1) {
         if (band->RasterIO(

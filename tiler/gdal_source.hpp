@@ -52,6 +52,15 @@ struct LatticeBlock {
     std::vector<std::uint8_t> valid;
 };
 
+// What DemSource::sample reads at one zoom: band 1 itself or one of its overviews (internal,
+// an external .ovr, or a VRT's implicit ones), then every `step`-th pixel of that band.
+struct ReadLevel {
+    int overview = -1;         // index among band 1's overviews (GDAL's order); -1 = band 1
+    int width = 0, height = 0; // pixels of the band read
+    double factor = 1;         // source pixels per pixel of it, larger of x and y; 1 for band 1
+    int step = 1;              // a power of two
+};
+
 // Band 1 of one DEM or of an in-memory VRT mosaic of several, opened for reading from many
 // threads: each call borrows a GDAL handle from a small pool (GDAL handles are not
 // thread-safe), so a DemSource is safe to share.
@@ -75,10 +84,15 @@ public:
     // Source pixels per lattice sample at zoom z (geometric mean, at the footprint's centre).
     virtual double pixels_per_sample(Scheme scheme, int z, int size) const = 0;
 
-    // Bilinear samples of the source at the lattice points of (scheme, z, size), reading a
-    // window of a reduced-resolution view of the source chosen per zoom (every
-    // 2^k-th pixel, aligned to the source's pixel grid), so the same lattice point gets the
-    // same value, bit for bit, whichever block it is read in. Thread-safe.
+    // The band and decimation sample() reads at zoom z, from (scheme, z, size) alone: the
+    // coarsest overview whose factor (both ways) is at most pixels_per_sample, else band 1;
+    // then step = the largest power of two with factor * step <= pixels_per_sample.
+    virtual ReadLevel read_level(Scheme scheme, int z, int size) const = 0;
+
+    // Bilinear samples of the source at the lattice points of (scheme, z, size), reading only
+    // the window they need of the level read_level() chooses (every step-th pixel of an
+    // overview or of band 1, aligned to that band's pixel grid), so the same lattice point
+    // gets the same value, bit for bit, whichever block it is read in. Thread-safe.
     virtual LatticeBlock sample(Scheme scheme,
                                 int z,
                                 int size,

@@ -1,5 +1,6 @@
 // Reading DEMs into tile rasters: bilinear sampling against GDAL's warper, nodata/NaN,
-// scale/offset, void filling, the geoid, and bit-identical borders of neighbouring tiles.
+// scale/offset, void filling, the geoid, bit-identical borders of neighbouring tiles, and
+// coarse zooms read from overviews (which level, their values, shared samples, `info`).
 #include "core/error.hpp"
 #include "core/triangulate.hpp"
 #include "tests/tiler/test_raster_util.hpp"
@@ -12,7 +13,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
+#include <fstream>
+#include <iterator>
 #include <map>
 #include <random>
 #include <set>
@@ -65,6 +69,96 @@ border_vertices(const tb::core::Mesh& mesh, int n, char side) {
         }
     }
     return out;
+}
+
+// ---- Overview fixtures ----
+
+// The fixture: kSide x kSide Float32 pixels of kPixel degrees from (kLon0, kLat0), north-west
+// corner. kPixel = 180 / 2^20 makes the lattice spacing of 256-sample tiles exactly 2^(12 - z)
+// pixels, so zoom 12 is native and each zoom above doubles pixels_per_sample. The origin is
+// off the lattice, so samples fall between pixel centres.
+constexpr int kSide = 2049;
+constexpr double kPixel = 180.0 / (1 << 20);
+constexpr double kLon0 = 10.0, kLat0 = 46.0;
+constexpr int kNative = 12;
+
+// A smooth surface at source pixel-centre coordinates (u, v): bilinear interpolation at a
+// spacing of L pixels is within about 3e-4 L^2 m of it.
+double surface(double u, double v) {
+    return 300 + 100 * std::sin(u / 250) * std::cos(v / 350) + 0.05 * u - 0.03 * v;
+}
+
+// Pixel-centre coordinates of a lon/lat in the fixture.
+double source_u(double lon) {
+    return (lon - kLon0) / kPixel - 0.5;
+}
+double source_v(double lat) {
+    return (kLat0 - lat) / kPixel - 0.5;
+}
+
+// Writes the fixture with AVERAGE overviews of factors 2, 4, 8 and 16 (1025, 513, 257 and 129
+// pixels wide), optionally with nodata pixels where `hole` says so.
+std::string write_surface(const std::string& path, bool (*hole)(int, int) = nullptr) {
+    Fixture f;
+    f.width = f.height = kSide;
+    f.geotransform = std::array<double, 6>{kLon0, kPixel, 0, kLat0, 0, -kPixel};
+    f.epsg = 4326;
+    f.values.resize(static_cast<std::size_t>(kSide) * kSide);
+    for (int r = 0; r < kSide; ++r) {
+        for (int c = 0; c < kSide; ++c) {
+            const bool void_pixel = hole && hole(c, r);
+            f.values[static_cast<std::size_t>(r) * kSide + c] = void_pixel ? -9999 : surface(c, r);
+        }
+    }
+    if (hole) {
+        f.nodata = -9999;
+    }
+    tb_test::write_fixture(path, f);
+    GDALDatasetUniquePtr ds(GDALDataset::Open(path.c_str(), GDAL_OF_RASTER | GDAL_OF_UPDATE));
+    REQUIRE(ds != nullptr);
+    const int factors[] = {2, 4, 8, 16};
+    REQUIRE(ds->BuildOverviews("AVERAGE", 4, factors, 0, nullptr, nullptr, nullptr) == CE_None);
+    REQUIRE(ds->GetRasterBand(1)->GetOverviewCount() == 4);
+    return path;
+}
+
+// Adds `delta` to every pixel of every overview of band 1, so values read from an overview
+// are recognizably not the full-resolution ones.
+void shift_overviews(const std::string& path, double delta) {
+    GDALDatasetUniquePtr ds(GDALDataset::Open(path.c_str(), GDAL_OF_RASTER | GDAL_OF_UPDATE));
+    REQUIRE(ds != nullptr);
+    GDALRasterBand* band = ds->GetRasterBand(1);
+    for (int k = 0; k < band->GetOverviewCount(); ++k) {
+        GDALRasterBand* o = band->GetOverview(k);
+        const int w = o->GetXSize(), h = o->GetYSize();
+        std::vector<double> values(static_cast<std::size_t>(w) * h);
+        REQUIRE(o->RasterIO(GF_Read, 0, 0, w, h, values.data(), w, h, GDT_Float64, 0, 0, nullptr) ==
+                CE_None);
+        for (double& value : values) {
+            value += delta;
+        }
+        REQUIRE(
+            o->RasterIO(GF_Write, 0, 0, w, h, values.data(), w, h, GDT_Float64, 0, 0, nullptr) ==
+            CE_None);
+    }
+}
+
+// The lattice block of (geodetic, z, 256) covering the whole fixture.
+LatticeBlock sample_all(const DemSource& source, int z) {
+    const double step = 180.0 / (1 << z) / 256;
+    const auto c0 = static_cast<std::int64_t>(std::floor((kLon0 + 180) / step));
+    const auto r0 = static_cast<std::int64_t>(std::floor((90 - kLat0) / step));
+    const int n = static_cast<int>(std::ceil(kSide * kPixel / step)) + 2;
+    return source.sample(Scheme::Geodetic, z, 256, c0, r0, n, n);
+}
+
+// The tile of zoom z containing the fixture's centre.
+TileId centre_tile(int z) {
+    const double lon = kLon0 + kSide * kPixel / 2, lat = kLat0 - kSide * kPixel / 2;
+    const double width = 180.0 / (1 << z); // geodetic tiles are square, y counted from the south
+    return {z,
+            static_cast<std::int64_t>(std::floor((lon + 180) / width)),
+            static_cast<std::int64_t>(std::floor((lat + 90) / width))};
 }
 
 } // namespace
@@ -424,4 +518,335 @@ TEST_CASE("tiles with voids on their shared border fill it identically (N46E008.
         previous = std::move(next);
     }
     CHECK(borders_with_voids > 0);
+}
+
+TEST_CASE("each zoom reads the coarsest overview no coarser than its samples, then decimates") {
+    ScratchDir dir;
+    const auto source = DemSource::open({write_surface(dir.file("surface.tif"))});
+    struct Expected {
+        int z, overview, width, step;
+    };
+    // pixels_per_sample is 2^(12 - z); overview k has factor 2049 / width, just under 2^(k+1).
+    const Expected expected[] = {{13, -1, kSide, 1},
+                                 {12, -1, kSide, 1},
+                                 {11, 0, 1025, 1},
+                                 {10, 1, 513, 1},
+                                 {9, 2, 257, 1},
+                                 {8, 3, 129, 1},
+                                 {7, 3, 129, 2},
+                                 {6, 3, 129, 4}};
+    for (const auto& e : expected) {
+        INFO("zoom " << e.z);
+        CHECK(source->pixels_per_sample(Scheme::Geodetic, e.z, 256) ==
+              std::ldexp(1.0, kNative - e.z));
+        const ReadLevel level = source->read_level(Scheme::Geodetic, e.z, 256);
+        CHECK(level.overview == e.overview);
+        CHECK(level.width == e.width);
+        CHECK(level.height == e.width);
+        CHECK(level.factor == doctest::Approx(static_cast<double>(kSide) / e.width));
+        CHECK(level.step == e.step);
+    }
+
+    // Without overviews the same zooms decimate band 1, as before overviews were read.
+    Fixture plain;
+    plain.width = plain.height = 64;
+    plain.geotransform = std::array<double, 6>{kLon0, kPixel, 0, kLat0, 0, -kPixel};
+    plain.epsg = 4326;
+    const auto bare = DemSource::open({tb_test::write_fixture(dir.file("plain.tif"), plain)});
+    const ReadLevel level = bare->read_level(Scheme::Geodetic, 9, 256);
+    CHECK(level.overview == -1);
+    CHECK(level.width == 64);
+    CHECK(level.factor == 1.0);
+    CHECK(level.step == 8);
+}
+
+TEST_CASE("coarse zooms take their heights from the overview, the native zoom from band 1") {
+    ScratchDir dir;
+    const std::string path = write_surface(dir.file("surface.tif"));
+    shift_overviews(path, 1000); // overview values are the surface + 1000 m
+    const auto source = DemSource::open({path});
+    for (int z = 6; z <= kNative; ++z) {
+        const ReadLevel level = source->read_level(Scheme::Geodetic, z, 256);
+        const LatticeBlock block = sample_all(*source, z);
+        // Spacing of the values interpolated, in source pixels: the interpolation error grows
+        // with its square; clamping beyond the outer pixel centres spoils one spacing at the
+        // edges, so those are left out.
+        const double spacing = level.factor * level.step;
+        const double tolerance = level.overview < 0 ? 0.01 : 0.3 + 5e-4 * spacing * spacing;
+        const double shift = level.overview < 0 ? 0.0 : 1000.0;
+        int checked = 0, outside = 0;
+        double worst = 0;
+        for (int j = 0; j < block.height; ++j) {
+            for (int i = 0; i < block.width; ++i) {
+                const std::size_t k = static_cast<std::size_t>(j) * block.width + i;
+                const double u = source_u(lattice_x(Scheme::Geodetic, z, 256, block.column0 + i));
+                const double v = source_v(lattice_y(Scheme::Geodetic, z, 256, block.row0 + j));
+                if (u < -0.5 || v < -0.5 || u > kSide - 0.5 || v > kSide - 0.5) {
+                    CHECK_FALSE(block.valid[k]);
+                    ++outside;
+                    continue;
+                }
+                REQUIRE(block.valid[k]);
+                if (std::min({u, v, kSide - 1 - u, kSide - 1 - v}) < spacing) {
+                    continue;
+                }
+                worst = std::max(worst, std::abs(block.heights[k] - (surface(u, v) + shift)));
+                ++checked;
+            }
+        }
+        INFO("zoom " << z << ": overview " << level.overview << ", step " << level.step
+                     << ", largest error " << worst << " m over " << checked << " samples");
+        CHECK(worst <= tolerance);
+        CHECK(checked >= 500);
+        CHECK(outside > 0);
+    }
+}
+
+TEST_CASE("overview zooms keep shared samples bit-identical across blocks and tiles") {
+    ScratchDir dir;
+    const std::string path = write_surface(dir.file("surface.tif"));
+    const auto source = DemSource::open({path});
+    // Blocks of 33 x 33 samples sharing their edges, and one block spanning all four: every
+    // lattice point must get the same bits and validity in each block that holds it.
+    for (int z : {11, 9, 7}) {
+        const double step = 180.0 / (1 << z) / 256;
+        const auto c0 = static_cast<std::int64_t>(std::floor((kLon0 + 180) / step)) + 3;
+        const auto r0 = static_cast<std::int64_t>(std::floor((90 - kLat0) / step)) + 3;
+        REQUIRE(source->read_level(Scheme::Geodetic, z, 256).overview >= 0);
+        const LatticeBlock all = source->sample(Scheme::Geodetic, z, 256, c0, r0, 65, 65);
+        int compared = 0, differences = 0;
+        for (int by = 0; by < 2; ++by) {
+            for (int bx = 0; bx < 2; ++bx) {
+                const LatticeBlock part =
+                    source->sample(Scheme::Geodetic, z, 256, c0 + 32 * bx, r0 + 32 * by, 33, 33);
+                for (int j = 0; j < 33; ++j) {
+                    for (int i = 0; i < 33; ++i) {
+                        const std::size_t a = static_cast<std::size_t>(j) * 33 + i;
+                        const std::size_t b =
+                            static_cast<std::size_t>(j + 32 * by) * 65 + (i + 32 * bx);
+                        if (std::memcmp(&part.heights[a], &all.heights[b], sizeof(double)) != 0 ||
+                            part.valid[a] != all.valid[b]) {
+                            ++differences;
+                        }
+                        compared += part.valid[a];
+                    }
+                }
+            }
+        }
+        INFO("zoom " << z);
+        CHECK(differences == 0);
+        CHECK(compared > 1000);
+    }
+
+    // Neighbouring tiles of a layer (64-sample tiles: zoom 11 reads the 257-pixel overview).
+    LayerOptions options;
+    options.sources = {path};
+    options.tile_size = 64;
+    options.min_zoom = 9;
+    options.datum = VerticalDatum::Ellipsoid;
+    const auto layer = Layer::open(options);
+    for (int z : {11, 10}) {
+        INFO("zoom " << z);
+        const TileId a = centre_tile(z);
+        const TileId east{z, a.x + 1, a.y}, north{z, a.x, a.y + 1}; // geodetic: y + 1 is north
+        const TileRaster ra = layer->make_raster(a);
+        check_shared_border(ra, layer->make_raster(east), true);
+        check_shared_border(ra, layer->make_raster(north), false);
+    }
+}
+
+TEST_CASE("an overview zoom's tile raster is the bilinear interpolation of the overview pixels") {
+    ScratchDir dir;
+    const std::string path = write_surface(dir.file("surface.tif"));
+    LayerOptions options;
+    options.sources = {path};
+    options.tile_size = 64;
+    options.min_zoom = 9;
+    options.datum = VerticalDatum::Ellipsoid; // the source's own heights, no geoid
+    const auto layer = Layer::open(options);
+
+    // The overviews read directly, as GDAL stores them.
+    GDALDatasetUniquePtr ds(GDALDataset::Open(path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY));
+    REQUIRE(ds != nullptr);
+    GDALRasterBand* band = ds->GetRasterBand(1);
+    // With 64-sample tiles zoom 14 is native: pixels_per_sample = 2^(14 - z), and the overview
+    // of factor 2049 / width just below it is read, undecimated.
+    const struct { int z, width; } zooms[] = {{13, 1025}, {12, 513}, {11, 257}, {10, 129}};
+    for (const auto& zoom : zooms) {
+        GDALRasterBand* overview = nullptr;
+        for (int k = 0; k < band->GetOverviewCount(); ++k) {
+            if (band->GetOverview(k)->GetXSize() == zoom.width) {
+                overview = band->GetOverview(k);
+            }
+        }
+        REQUIRE(overview != nullptr);
+        const int wo = overview->GetXSize(), ho = overview->GetYSize();
+        const auto pixel = [&](int i, int j) {
+            float value = 0;
+            REQUIRE(overview->RasterIO(
+                        GF_Read, i, j, 1, 1, &value, 1, 1, GDT_Float32, 0, 0, nullptr) == CE_None);
+            return static_cast<double>(value);
+        };
+
+        const TileId id = centre_tile(zoom.z);
+        const TileRaster raster = layer->make_raster(id);
+        const std::int64_t c0 = tile_first_column(Scheme::Geodetic, id, 64);
+        const std::int64_t r0 = tile_first_row(Scheme::Geodetic, id, 64);
+        int checked = 0;
+        double worst = 0;
+        for (int j = 0; j <= 64; j += 8) {
+            for (int i = 0; i <= 64; i += 8) {
+                const double lon = lattice_x(Scheme::Geodetic, zoom.z, 64, c0 + i);
+                const double lat = lattice_y(Scheme::Geodetic, zoom.z, 64, r0 + j);
+                // Pixel-centre coordinates in the overview, which spans the source's extent.
+                const double uo = (source_u(lon) + 0.5) * wo / kSide - 0.5;
+                const double vo = (source_v(lat) + 0.5) * ho / kSide - 0.5;
+                if (uo < 0 || vo < 0 || uo > wo - 1 || vo > ho - 1) {
+                    continue; // beyond the outer pixel centres, where the reader clamps
+                }
+                const int iu = std::min(static_cast<int>(uo), wo - 2);
+                const int iv = std::min(static_cast<int>(vo), ho - 2);
+                const double a = uo - iu, b = vo - iv;
+                const double expected =
+                    (1 - a) * (1 - b) * pixel(iu, iv) + a * (1 - b) * pixel(iu + 1, iv) +
+                    (1 - a) * b * pixel(iu, iv + 1) + a * b * pixel(iu + 1, iv + 1);
+                REQUIRE(raster.grid.is_valid(i, j));
+                worst = std::max(worst, std::abs(raster.grid.at(i, j) - expected));
+                ++checked;
+            }
+        }
+        INFO("zoom " << zoom.z << ": largest difference " << worst << " m over " << checked
+                     << " samples");
+        CHECK(checked >= 40);
+        CHECK(worst < 1e-4); // float32 rounding of heights near 300 m is 3e-5 m
+    }
+}
+
+TEST_CASE("overviews keep nodata voids that cover whole overview pixels") {
+    ScratchDir dir;
+    // A 300 x 300 pixel nodata square in the middle of the surface.
+    const auto hole = [](int c, int r) { return c >= 900 && c < 1200 && r >= 900 && r < 1200; };
+    const auto source = DemSource::open({write_surface(dir.file("holes.tif"), hole)});
+    const int z = 9; // the 257-pixel overview, pixels of 8 source pixels
+    REQUIRE(source->read_level(Scheme::Geodetic, z, 256).overview == 2);
+    const LatticeBlock block = sample_all(*source, z);
+    int voids = 0, valid = 0;
+    for (int j = 0; j < block.height; ++j) {
+        for (int i = 0; i < block.width; ++i) {
+            const std::size_t k = static_cast<std::size_t>(j) * block.width + i;
+            const double u = source_u(lattice_x(Scheme::Geodetic, z, 256, block.column0 + i));
+            const double v = source_v(lattice_y(Scheme::Geodetic, z, 256, block.row0 + j));
+            if (u < -0.5 || v < -0.5 || u > kSide - 0.5 || v > kSide - 0.5) {
+                continue;
+            }
+            // Well inside the hole: void. Well away from it: valid, never a -9999 blend.
+            const double inside = std::min({u - 900, 1199 - u, v - 900, 1199 - v});
+            if (inside > 16) {
+                CHECK_FALSE(block.valid[k]);
+                ++voids;
+            } else if (inside < -16) {
+                REQUIRE(block.valid[k]);
+                CHECK(std::abs(block.heights[k] - surface(u, v)) < 2.0);
+                ++valid;
+            }
+        }
+    }
+    CHECK(voids > 100);
+    CHECK(valid > 10000);
+}
+
+TEST_CASE("overviews in an external .ovr file and a mosaic's implicit overviews are read") {
+    ScratchDir dir;
+    // Three 1024 x 1024 tiles of 100 m: external.tif gets its overviews in external.tif.ovr
+    // (GTiff writes them there when the file is opened read-only); west.tif and east.tif get
+    // internal ones, and a mosaic of the two gets implicit ones from GDAL's VRT.
+    const auto write_flat = [&](const std::string& name, int column0, bool external) {
+        Fixture f;
+        f.width = f.height = 1024;
+        f.geotransform =
+            std::array<double, 6>{kLon0 + column0 * kPixel, kPixel, 0, kLat0, 0, -kPixel};
+        f.epsg = 4326;
+        f.values.assign(static_cast<std::size_t>(1024) * 1024, 100.0);
+        const std::string path = tb_test::write_fixture(dir.file(name), f);
+        GDALDatasetUniquePtr ds(GDALDataset::Open(
+            path.c_str(), GDAL_OF_RASTER | (external ? GDAL_OF_READONLY : GDAL_OF_UPDATE)));
+        REQUIRE(ds != nullptr);
+        const int factors[] = {2, 4};
+        REQUIRE(ds->BuildOverviews("AVERAGE", 2, factors, 0, nullptr, nullptr, nullptr) == CE_None);
+        ds.reset();
+        shift_overviews(path, 1000);
+        return path;
+    };
+    const std::string external = write_flat("external.tif", 0, true);
+    REQUIRE(std::filesystem::exists(external + ".ovr"));
+    const std::string west = write_flat("west.tif", 0, false);
+    const std::string east = write_flat("east.tif", 1024, false);
+
+    struct Case {
+        std::vector<std::string> paths;
+        int width, height;
+    };
+    for (const Case& c : {Case{{external}, 256, 256}, Case{{west, east}, 512, 256}}) {
+        INFO(c.paths.size() << " file(s)");
+        const auto source = DemSource::open(c.paths);
+        // Zoom 9: 8 pixels per sample, so the factor-4 overview read every 2nd pixel.
+        const ReadLevel level = source->read_level(Scheme::Geodetic, 9, 256);
+        CHECK(level.overview == 1);
+        CHECK(level.width == c.width);
+        CHECK(level.height == c.height);
+        CHECK(level.step == 2);
+        const LatticeBlock block = sample_all(*source, 9);
+        int valid = 0;
+        for (std::size_t k = 0; k < block.heights.size(); ++k) {
+            if (block.valid[k]) {
+                CHECK(block.heights[k] == doctest::Approx(1100).epsilon(1e-12));
+                ++valid;
+            }
+        }
+        CHECK(valid > 100 * static_cast<int>(c.paths.size()));
+    }
+}
+
+TEST_CASE(
+    "info says what each zoom reads, and a large DEM without overviews gets a gdaladdo hint") {
+    ScratchDir dir;
+    const std::string surface = write_surface(dir.file("surface.tif"));
+    // 5000 x 5000 pixels never written (sparse: a few KB), no overviews.
+    {
+        GDALDriver* driver = GetGDALDriverManager()->GetDriverByName("GTiff");
+        const char* options[] = {"SPARSE_OK=TRUE", "TILED=YES", nullptr};
+        GDALDatasetUniquePtr ds(driver->Create(
+            dir.file("large.tif").c_str(), 5000, 5000, 1, GDT_Int16, const_cast<char**>(options)));
+        REQUIRE(ds != nullptr);
+        double gt[6] = {kLon0, kPixel, 0, kLat0, 0, -kPixel};
+        OGRSpatialReference srs;
+        srs.importFromEPSG(4326);
+        REQUIRE(ds->SetGeoTransform(gt) == CE_None);
+        REQUIRE(ds->SetSpatialRef(&srs) == CE_None);
+    }
+    const auto run = [&](const std::string& arguments, std::string& out, std::string& err) {
+        const std::string command = std::string(TB_BINARY) + " " + arguments + " >" +
+                                    dir.file("out.txt") + " 2>" + dir.file("err.txt");
+        const int status = std::system(command.c_str());
+        std::ifstream o(dir.file("out.txt")), e(dir.file("err.txt"));
+        out.assign(std::istreambuf_iterator<char>(o), {});
+        err.assign(std::istreambuf_iterator<char>(e), {});
+        return status;
+    };
+    std::string out, err;
+    REQUIRE_MESSAGE(run("info " + surface, out, err) == 0, err);
+    // Zooms 7..12 (256-sample tiles): see the first test case for the levels.
+    CHECK(out.find("      12  ") != std::string::npos);
+    CHECK(out.find("full resolution\n") != std::string::npos);
+    CHECK(out.find("overview 1 (1/2)\n") != std::string::npos);
+    CHECK(out.find("overview 3 (1/7.97)\n") != std::string::npos);
+    CHECK(err.find("gdaladdo") == std::string::npos);
+
+    REQUIRE_MESSAGE(run("info " + dir.file("large.tif"), out, err) == 0, err);
+    CHECK(out.find("every 2nd pixel\n") != std::string::npos);
+    // Once, though `info` opens the DEM twice (for the plan and for the reads column).
+    const auto hint = err.find("gdaladdo -r average");
+    CHECK(hint != std::string::npos);
+    CHECK(err.find("gdaladdo -r average", hint + 1) == std::string::npos);
+    CHECK(err.find(" info ") != std::string::npos); // logged at info level
 }
