@@ -26,16 +26,28 @@ inline double inverse_area(GridPoint a, GridPoint b, GridPoint c) {
 }
 
 // > 0 when d lies strictly inside the circumcircle of the counter-clockwise triangle (a, b, c).
+// With every coordinate difference to d below 2^14 (all triangles of a tile, most of a large
+// grid) the determinant is below 12 * 2^56 and int64 holds it exactly; otherwise __int128 does.
 inline int incircle(GridPoint a, GridPoint b, GridPoint c, GridPoint d) {
+    const std::int64_t adx = std::int64_t{a.x} - d.x, ady = std::int64_t{a.y} - d.y;
+    const std::int64_t bdx = std::int64_t{b.x} - d.x, bdy = std::int64_t{b.y} - d.y;
+    const std::int64_t cdx = std::int64_t{c.x} - d.x, cdy = std::int64_t{c.y} - d.y;
+    constexpr std::int64_t kSmall = std::int64_t{1} << 14;
+    const auto small = [](std::int64_t v) { return v > -kSmall && v < kSmall; };
+    if (small(adx) && small(ady) && small(bdx) && small(bdy) && small(cdx) && small(cdy)) {
+        const std::int64_t alift = adx * adx + ady * ady;
+        const std::int64_t blift = bdx * bdx + bdy * bdy;
+        const std::int64_t clift = cdx * cdx + cdy * cdy;
+        const std::int64_t det = alift * (bdx * cdy - cdx * bdy) +
+                                 blift * (cdx * ady - adx * cdy) + clift * (adx * bdy - bdx * ady);
+        return det > 0 ? 1 : (det < 0 ? -1 : 0);
+    }
     using W = Int128;
-    const W adx = W{a.x} - d.x, ady = W{a.y} - d.y;
-    const W bdx = W{b.x} - d.x, bdy = W{b.y} - d.y;
-    const W cdx = W{c.x} - d.x, cdy = W{c.y} - d.y;
-    const W alift = adx * adx + ady * ady;
-    const W blift = bdx * bdx + bdy * bdy;
-    const W clift = cdx * cdx + cdy * cdy;
-    const W det = alift * (bdx * cdy - cdx * bdy) + blift * (cdx * ady - adx * cdy) +
-                  clift * (adx * bdy - bdx * ady);
+    const W alift = W{adx} * adx + W{ady} * ady;
+    const W blift = W{bdx} * bdx + W{bdy} * bdy;
+    const W clift = W{cdx} * cdx + W{cdy} * cdy;
+    const W det = alift * (W{bdx} * cdy - W{cdx} * bdy) + blift * (W{cdx} * ady - W{adx} * cdy) +
+                  clift * (W{adx} * bdy - W{bdx} * ady);
     return det > 0 ? 1 : (det < 0 ? -1 : 0);
 }
 

@@ -70,3 +70,45 @@ TEST_CASE("a full lattice of cocircular points triangulates without zero-area tr
     std::vector<float> zero(99, 0.0f);
     CHECK(tin.to_mesh(zero, 11).triangle_count() == 2 * 10 * 8);
 }
+
+TEST_CASE("incircle agrees with a 128-bit determinant on both sides of its int64 range") {
+    // Reference: the lifted determinant in __int128 with coordinates taken relative to d,
+    // written out here independently of core/predicates.hpp.
+    __extension__ typedef __int128 Wide;
+    const auto reference = [](tb::core::GridPoint a,
+                              tb::core::GridPoint b,
+                              tb::core::GridPoint c,
+                              tb::core::GridPoint d) {
+        const Wide ax = Wide{a.x} - d.x, ay = Wide{a.y} - d.y, bx = Wide{b.x} - d.x,
+                   by = Wide{b.y} - d.y, cx = Wide{c.x} - d.x, cy = Wide{c.y} - d.y;
+        const Wide det = (ax * ax + ay * ay) * (bx * cy - cx * by) -
+                         (bx * bx + by * by) * (ax * cy - cx * ay) +
+                         (cx * cx + cy * cy) * (ax * by - bx * ay);
+        return det > 0 ? 1 : (det < 0 ? -1 : 0);
+    };
+    terrain::Lcg r(7);
+    // Spans around 2^14, where incircle switches from int64 to __int128, up to the full grid.
+    const int spans[] = {3, 200, 16383, 16384, 16385, 40000, 1 << 20};
+    int checked = 0, zeros = 0;
+    for (int span : spans) {
+        for (int k = 0; k < 4000; ++k) {
+            const auto pick = [&] {
+                return tb::core::GridPoint{static_cast<std::int32_t>(r.next() * span),
+                                           static_cast<std::int32_t>(r.next() * span)};
+            };
+            tb::core::GridPoint a = pick(), b = pick(), c = pick(), d = pick();
+            if (k % 4 == 0) {
+                // Cocircular on purpose: the corners of an axis-aligned rectangle.
+                const std::int32_t x1 = std::max(a.x, b.x) + 1, y1 = std::max(a.y, b.y) + 1;
+                const std::int32_t x0 = std::min(a.x, b.x), y0 = std::min(a.y, b.y);
+                a = {x0, y0}, b = {x1, y0}, c = {x1, y1}, d = {x0, y1};
+            }
+            const int want = reference(a, b, c, d);
+            zeros += want == 0 ? 1 : 0;
+            CHECK(tb::core::incircle(a, b, c, d) == want);
+            ++checked;
+        }
+    }
+    CHECK(checked == 28000);
+    CHECK(zeros >= 7000); // the cocircular rectangles
+}
