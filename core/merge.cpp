@@ -7,7 +7,6 @@
 // whose hole has no such re-triangulation stays.
 #include <algorithm>
 #include <array>
-#include <climits>
 #include <cmath>
 #include <functional>
 
@@ -35,29 +34,36 @@ constexpr int kMaxAttempts = 6;
 // other in memory. The total error is not a tie-breaker: being continuous it would scatter the
 // visits again. On the 1025x1025 Andes tile this merges about 25% faster than the exact order
 // and ends with 0.2% fewer triangles: the exact order is no better for the final count.
+//
+// The three keys are packed into two integers, compared as one: sorting is a visible share of
+// a merge pass at fine eps.
 struct Candidate {
-    int flatness_class;
-    std::int64_t error_points;
+    std::uint64_t major; // flatness class (11 bits, biased), then error points (41 bits)
     std::uint64_t z_order;
     Index v;
     friend bool operator<(const Candidate& a, const Candidate& b) {
-        if (a.flatness_class != b.flatness_class) {
-            return a.flatness_class < b.flatness_class;
-        }
-        if (a.error_points != b.error_points) {
-            return a.error_points < b.error_points;
-        }
-        return a.z_order < b.z_order;
+        return a.major != b.major ? a.major < b.major : a.z_order < b.z_order;
     }
 };
 
-int flatness_class(double deviation) {
+// Octave of the flatness deviation (1 - cos, in [0, 2]) as a small unsigned rank: frexp
+// exponents run from -1073 (subnormal) to 2; a flat or degenerate neighbourhood ranks first.
+std::uint64_t flatness_class(double deviation) {
     if (!(deviation > 0.0)) {
-        return INT_MIN; // a perfectly flat (or degenerate) neighbourhood
+        return 0;
     }
     int exponent = 0;
     std::frexp(deviation, &exponent);
-    return exponent;
+    return static_cast<std::uint64_t>(std::clamp(exponent + 1100, 1, 2047));
+}
+
+Candidate candidate(double deviation, std::int64_t error_points, GridPoint p, Index v) {
+    // Error points are at most the grid's 2^40 samples.
+    constexpr std::int64_t kMaxPoints = (std::int64_t{1} << 41) - 1;
+    return {flatness_class(deviation) << 41 |
+                static_cast<std::uint64_t>(std::clamp<std::int64_t>(error_points, 0, kMaxPoints)),
+            z_order_key(p),
+            v};
 }
 
 } // namespace
@@ -386,8 +392,7 @@ std::size_t Refiner::merge_pass() {
     // would fail the same way.
     std::vector<Candidate> order;
     for (Index v : todo) {
-        order.push_back(
-            {flatness_class(deviation[v]), error_points[v], z_order_key(tin_.points[v]), v});
+        order.push_back(candidate(deviation[v], error_points[v], tin_.points[v], v));
     }
     std::sort(order.begin(), order.end());
     std::size_t removed = 0;
