@@ -158,6 +158,8 @@ int main(int argc, char** argv) {
                 const auto t1 = std::chrono::steady_clock::now();
                 times.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
             }
+            // Best of the runs: the statistic ../shared/bench/run_js_peer.mjs reports for the
+            // peer, so the two are compared like for like.
             std::sort(times.begin(), times.end());
             const double err = tb::core::max_error(mesh, g);
             ok = ok && err <= eps;
@@ -166,7 +168,7 @@ int main(int argc, char** argv) {
                         g.width,
                         g.height,
                         e.c_str(),
-                        times[times.size() / 2],
+                        times.front(),
                         mesh.triangle_count(),
                         err);
             std::fflush(stdout);
