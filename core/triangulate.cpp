@@ -27,7 +27,9 @@ std::string number(double v) {
     return s.str();
 }
 
-void validate(const HeightGrid& grid, const TriangulateOptions& options) {
+} // namespace
+
+void check_input(const HeightGrid& grid, const TriangulateOptions& options) {
     if (grid.width < 2 || grid.height < 2) {
         throw InputError("grid is " + std::to_string(grid.width) + "x" +
                          std::to_string(grid.height) + ": needs at least 2x2 samples");
@@ -69,10 +71,8 @@ void validate(const HeightGrid& grid, const TriangulateOptions& options) {
     }
 }
 
-} // namespace
-
 Mesh triangulate(const HeightGrid& grid, const TriangulateOptions& options) {
-    validate(grid, options);
+    check_input(grid, options);
     const double eps = options.eps;
     const int max_step = max_step_for(options.max_edge);
     Tin start = delaunay_rectangle(grid.width, grid.height, anchor_points(grid, eps, max_step));

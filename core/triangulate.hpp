@@ -25,6 +25,22 @@ inline constexpr double kMinMaxEdge = 1.5;
 // and 0 or >= kMinMaxEdge, else InputError), and the result is deterministic bit for bit.
 Mesh triangulate(const HeightGrid& grid, const TriangulateOptions& options);
 
+// Throws tb::InputError naming the problem when triangulate() would refuse grid or options.
+void check_input(const HeightGrid& grid, const TriangulateOptions& options);
+
+// The same guarantee, with the grid cut into `strips` vertical strips of nearly equal width
+// that share their cut columns, each meshed by triangulate() on its own thread, then stitched.
+// A cut column is a locked border of both strips it separates, so both give it the same
+// vertices (the optimal 1-D fit of that column), exactly as two neighbouring tiles share a
+// border: the stitched mesh is conforming. The strips cost a few triangles along the cuts
+// (0.1-0.7 % for two strips of a 257 x 257 tile) and divide the wall time by up to `strips`
+// on as many cores. The result depends on grid, options and strips alone, never on thread
+// timing. Meshes the grid whole when options.lock_border is off (the cuts must be locked) or
+// when strips of at least kMinStripColumns columns do not fit.
+Mesh triangulate_strips(const HeightGrid& grid, const TriangulateOptions& options, int strips);
+
+inline constexpr int kMinStripColumns = 33;
+
 // Largest |mesh - height| over the valid samples, by exact point location (the guarantee check).
 double max_error(const Mesh& mesh, const HeightGrid& grid);
 
