@@ -84,8 +84,9 @@ public:
 // at least 0.001 m (below that, float32 heights cannot honour it).
 void check_eps(double eps, const std::string& what);
 
-// The tile mesh exactly as encoded: core::triangulate(raster.grid) at budget.mesh_eps with
-// locked borders and budget.max_edge (see tile_error_budget).
+// The tile mesh exactly as encoded: core::triangulate_strips(raster.grid, ..., 2) at
+// budget.mesh_eps with locked borders and budget.max_edge (see tile_error_budget): two strips
+// meshed on two threads, stitched along a locked middle column.
 core::Mesh mesh_tile(const TileRaster& raster, const ErrorBudget& budget);
 
 // A mesh in grid coordinates as text: OBJ ("v column row height", 1-based "f i j k") or JSON
