@@ -26,8 +26,9 @@ namespace {
 // see (fill_voids step 1 radius).
 constexpr int kFillMargin = 16;
 
-// Default eps at max_zoom: resolution / 45, i.e. 2 m for SRTM3 (~90 m), scaling with the
-// sample spacing like every level of the ladder. 2 m is a third of SRTM's relative vertical
+// Default eps at max_zoom: its sample spacing (at least the resolution) / 45, i.e. 2 m for
+// SRTM3 (~90 m) at the native zoom, scaling with the sample spacing like every level of the
+// ladder. 2 m is a third of SRTM's relative vertical
 // accuracy (about 6 m, 90% linear error) and four times its 1 m integer quantization, so the
 // mesh error stays well below the data's own noise while the meshes stay small; it is also
 // far below CesiumJS's level geometric error (77067 m / 2^z, about 75 m at SRTM3's z = 10).
@@ -59,9 +60,13 @@ public:
                 source_->ellipsoidal_heights() ? VerticalDatum::Ellipsoid : VerticalDatum::Egm96;
         }
         plan_zooms();
+        // The default scales with the sample spacing at max_zoom, which is coarser than the
+        // source's pixels when max_zoom is set below the native zoom.
+        const double pixels = std::max(
+            1.0, source_->pixels_per_sample(options_.scheme, max_zoom_, options_.tile_size));
         finest_eps_ = options_.finest_eps
                           ? *options_.finest_eps
-                          : std::max(kMinEps, info.resolution_m / kResolutionPerEps);
+                          : std::max(kMinEps, info.resolution_m * pixels / kResolutionPerEps);
         compute_height_range();
     }
 

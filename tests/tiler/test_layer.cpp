@@ -211,3 +211,21 @@ TEST_CASE("encoded tiles decode, and many threads get the same bytes as one") {
     const DecodedTile drc = decode_drc(layer->make_tile(ids[0], Format::Drc));
     CHECK(drc.indices.size() == decoded.indices.size());
 }
+
+TEST_CASE("a max_zoom below the native zoom scales the default eps to that zoom's spacing") {
+    const auto path = tb_test::shared_dem("N44W072.hgt");
+    if (!path) {
+        return;
+    }
+    LayerOptions options;
+    options.sources = {*path};
+    options.max_zoom = 8;
+    const auto layer = Layer::open(options);
+    const auto native = open_layer({*path});
+    // z8 samples are about 3.3 pixels apart: eps about 3.3 x 1.74 m, near the native ladder's
+    // 4 x 1.74 m at z8, never the native finest eps (whose lattice z8 tiles cannot hold).
+    CHECK(layer->eps_for_zoom(8) == doctest::Approx(3.3 * native->eps_for_zoom(10)).epsilon(0.1));
+    const TileRange r = layer->tiles_at(8);
+    const std::string glb = layer->make_tile({8, r.x0, r.y0}, Format::Glb, {});
+    CHECK(glb.size() > 1000);
+}
