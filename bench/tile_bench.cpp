@@ -1,7 +1,8 @@
 // tile_bench: tiles per second for making every tile of one zoom of a real SRTM cell
-// (read + datum -> tile raster, core::triangulate, encode_tile glb), with bytes per tile and
-// per triangle and each stage's share of the time. One thread (the tiles are independent; a
-// server runs one per core). Prints TSV; exits 1 if any tile's mesh exceeds its mesh eps.
+// (read + datum -> tile raster, mesh_tile = core::triangulate_strips, encode_tile glb), with
+// bytes per tile and per triangle and each stage's share of the time. One tile at a time (the
+// tiles are independent; a server runs one per core), its mesh on two threads (two strips).
+// Prints TSV; exits 1 if any tile's mesh exceeds its mesh eps.
 //
 // Input: ../shared/data/N44W072.hgt by default (1201 x 1201 SRTM3, White Mountains: real
 // relief from 115 to 1908 m, no voids), or the DEM given as argv[1]; zoom argv[2] (default:
