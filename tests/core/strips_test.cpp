@@ -13,6 +13,7 @@
 #include "core/breakpoints.hpp"
 #include "core/error.hpp"
 #include "core/triangulate.hpp"
+#include "tests/core/brute_force.hpp"
 #include "tests/core/linf_oracle.hpp"
 #include "tests/core/terrains.hpp"
 
@@ -21,18 +22,6 @@ namespace {
 using tb::core::HeightGrid;
 using tb::core::Mesh;
 using tb::core::TriangulateOptions;
-
-// Rows of the vertices of m on column x, ascending.
-std::vector<int> rows_on_column(const Mesh& m, int x) {
-    std::vector<int> rows;
-    for (const auto& p : m.points) {
-        if (p.x == x) {
-            rows.push_back(p.y);
-        }
-    }
-    std::sort(rows.begin(), rows.end());
-    return rows;
-}
 
 // The optimal 1-D fit of column x of g (what a locked border of either strip must hold).
 std::vector<int> column_fit(const HeightGrid& g, int x, const TriangulateOptions& opt) {
@@ -88,7 +77,7 @@ TEST_CASE("strips stay within eps, tile the grid and repeat bit for bit (seed 5)
                     const int n = std::min(strips, (w - 1) / (tb::core::kMinStripColumns - 1));
                     for (int k = 1; k < n; ++k) {
                         const int x = static_cast<int>(std::int64_t{w - 1} * k / n);
-                        CHECK(rows_on_column(m, x) == column_fit(g, x, opt));
+                        CHECK(brute::on_column(m, x) == column_fit(g, x, opt));
                     }
                 }
             }

@@ -152,6 +152,27 @@ LatticeBlock sample_all(const DemSource& source, int z) {
     return source.sample(Scheme::Geodetic, z, 256, c0, r0, n, n);
 }
 
+// Calls f(k, u, v) for every sample k of a block of (geodetic, z, 256) whose lattice point lies
+// within the fixture's pixel area, (u, v) being that point in source pixel-centre coordinates;
+// returns how many samples lie outside it.
+template <class F> int for_each_inside(const LatticeBlock& block, int z, F f) {
+    int outside = 0;
+    for (int j = 0; j < block.height; ++j) {
+        for (int i = 0; i < block.width; ++i) {
+            const std::size_t k = static_cast<std::size_t>(j) * block.width + i;
+            const double u = source_u(lattice_x(Scheme::Geodetic, z, 256, block.column0 + i));
+            const double v = source_v(lattice_y(Scheme::Geodetic, z, 256, block.row0 + j));
+            if (u < -0.5 || v < -0.5 || u > kSide - 0.5 || v > kSide - 0.5) {
+                CHECK_FALSE(block.valid[k]);
+                ++outside;
+                continue;
+            }
+            f(k, u, v);
+        }
+    }
+    return outside;
+}
+
 // The tile of zoom z containing the fixture's centre.
 TileId centre_tile(int z) {
     const double lon = kLon0 + kSide * kPixel / 2, lat = kLat0 - kSide * kPixel / 2;
@@ -574,26 +595,16 @@ TEST_CASE("coarse zooms take their heights from the overview, the native zoom fr
         const double spacing = level.factor * level.step;
         const double tolerance = level.overview < 0 ? 0.01 : 0.3 + 5e-4 * spacing * spacing;
         const double shift = level.overview < 0 ? 0.0 : 1000.0;
-        int checked = 0, outside = 0;
+        int checked = 0;
         double worst = 0;
-        for (int j = 0; j < block.height; ++j) {
-            for (int i = 0; i < block.width; ++i) {
-                const std::size_t k = static_cast<std::size_t>(j) * block.width + i;
-                const double u = source_u(lattice_x(Scheme::Geodetic, z, 256, block.column0 + i));
-                const double v = source_v(lattice_y(Scheme::Geodetic, z, 256, block.row0 + j));
-                if (u < -0.5 || v < -0.5 || u > kSide - 0.5 || v > kSide - 0.5) {
-                    CHECK_FALSE(block.valid[k]);
-                    ++outside;
-                    continue;
-                }
-                REQUIRE(block.valid[k]);
-                if (std::min({u, v, kSide - 1 - u, kSide - 1 - v}) < spacing) {
-                    continue;
-                }
-                worst = std::max(worst, std::abs(block.heights[k] - (surface(u, v) + shift)));
-                ++checked;
+        const int outside = for_each_inside(block, z, [&](std::size_t k, double u, double v) {
+            REQUIRE(block.valid[k]);
+            if (std::min({u, v, kSide - 1 - u, kSide - 1 - v}) < spacing) {
+                return;
             }
-        }
+            worst = std::max(worst, std::abs(block.heights[k] - (surface(u, v) + shift)));
+            ++checked;
+        });
         INFO("zoom " << z << ": overview " << level.overview << ", step " << level.step
                      << ", largest error " << worst << " m over " << checked << " samples");
         CHECK(worst <= tolerance);
@@ -731,26 +742,18 @@ TEST_CASE("overviews keep nodata voids that cover whole overview pixels") {
     REQUIRE(source->read_level(Scheme::Geodetic, z, 256).overview == 2);
     const LatticeBlock block = sample_all(*source, z);
     int voids = 0, valid = 0;
-    for (int j = 0; j < block.height; ++j) {
-        for (int i = 0; i < block.width; ++i) {
-            const std::size_t k = static_cast<std::size_t>(j) * block.width + i;
-            const double u = source_u(lattice_x(Scheme::Geodetic, z, 256, block.column0 + i));
-            const double v = source_v(lattice_y(Scheme::Geodetic, z, 256, block.row0 + j));
-            if (u < -0.5 || v < -0.5 || u > kSide - 0.5 || v > kSide - 0.5) {
-                continue;
-            }
-            // Well inside the hole: void. Well away from it: valid, never a -9999 blend.
-            const double inside = std::min({u - 900, 1199 - u, v - 900, 1199 - v});
-            if (inside > 16) {
-                CHECK_FALSE(block.valid[k]);
-                ++voids;
-            } else if (inside < -16) {
-                REQUIRE(block.valid[k]);
-                CHECK(std::abs(block.heights[k] - surface(u, v)) < 2.0);
-                ++valid;
-            }
+    for_each_inside(block, z, [&](std::size_t k, double u, double v) {
+        // Well inside the hole: void. Well away from it: valid, never a -9999 blend.
+        const double inside = std::min({u - 900, 1199 - u, v - 900, 1199 - v});
+        if (inside > 16) {
+            CHECK_FALSE(block.valid[k]);
+            ++voids;
+        } else if (inside < -16) {
+            REQUIRE(block.valid[k]);
+            CHECK(std::abs(block.heights[k] - surface(u, v)) < 2.0);
+            ++valid;
         }
-    }
+    });
     CHECK(voids > 100);
     CHECK(valid > 10000);
 }
