@@ -95,7 +95,6 @@ std::string describe_pyramid(const std::string& path, tiler::Scheme scheme) {
         out << "  pyramid:     none (" << e.what() << ")\n";
         return out.str();
     }
-    const auto source = tiler::DemSource::open({path});
     const auto& o = layer->options();
     const auto b = layer->data_bounds();
     out << "  pyramid:     " << to_string(o.scheme) << ", " << o.tile_size
@@ -116,7 +115,7 @@ std::string describe_pyramid(const std::string& path, tiler::Scheme scheme) {
                       static_cast<long long>(r.x1 - r.x0 + 1),
                       static_cast<long long>(r.y1 - r.y0 + 1),
                       layer->eps_for_zoom(z),
-                      describe_read(source->read_level(o.scheme, z, o.tile_size)).c_str());
+                      describe_read(layer->source().read_level(o.scheme, z, o.tile_size)).c_str());
         out << line;
     }
     return out.str();

@@ -135,6 +135,7 @@ public:
     double min_height() const override { return min_height_; }
     double max_height() const override { return max_height_; }
     VerticalDatum source_datum() const override { return datum_; }
+    const DemSource& source() const override { return *source_; }
 
 private:
     void validate_options() {

@@ -14,6 +14,10 @@
 #include <vector>
 
 namespace tb::tiler {
+class DemSource;
+}
+
+namespace tb::tiler {
 
 enum class VerticalDatum {
     Auto,      // egm96, unless the source CRS states WGS84 ellipsoidal heights (EPSG:4979-like)
@@ -78,6 +82,8 @@ public:
     // The datum the source heights are taken in (Auto resolved: Egm96 unless the source's CRS
     // states WGS84 ellipsoidal heights).
     virtual VerticalDatum source_datum() const = 0;
+    // The DEM (or mosaic) the layer reads, e.g. for what each zoom reads (read_level).
+    virtual const DemSource& source() const = 0;
 };
 
 // Checks a published eps (metres) and throws InputError naming `what` unless it is finite and
