@@ -66,7 +66,7 @@ void check_band(const std::string& name, GDALDataset& ds) {
 }
 
 // Without overviews each coarse zoom reads every block of the source, which is slow for a large
-// DEM. Said once per source per process (`info` opens it twice, several layers may share it).
+// DEM. Said once per source per process: several layers (and reloads) may open the same DEM.
 void suggest_overviews(const DemInfo& info, bool mosaic) {
     static std::mutex mutex;
     static std::set<std::string> told;
