@@ -35,43 +35,26 @@ struct EdgeFn {
     }
 };
 
-// The x bound that edge function f puts on rows y0, y0 + step, ...: x >= lo_bound when f.a > 0,
-// x <= hi_bound when f.a < 0, no x at all when f.a == 0 and the row is outside. Walked row by
-// row with an exact integer quotient and remainder, so no division per row:
-// q = floor(n / d) with n = b0 + by * y - min and d = |a| (then the bound is -q for a > 0,
-// since ceil((min - b) / a) = -floor((b - min) / a), and q for a < 0).
+// The x bound that a non-horizontal edge function f puts on rows y0, y0 + step, ...: x >= bound
+// when f.a > 0 (a left edge), x <= bound when f.a < 0 (a right edge). Walked row by row with an
+// exact integer quotient and remainder, so no division per row: q = floor(n / d) with
+// n = b0 + by * y - min and d = |a|; the bound is -q for a left edge (ceil((min - b) / a) =
+// -floor((b - min) / a)) and q for a right edge.
 class RowBound {
 public:
-    RowBound(const EdgeFn& f, std::int64_t y0, std::int64_t step) : a_(f.a), n_(0) {
+    RowBound() = default;
+    RowBound(const EdgeFn& f, std::int64_t y0, std::int64_t step)
+        : sign_(f.a > 0 ? -1 : 1), d_(f.a > 0 ? f.a : -f.a) {
         const std::int64_t n = f.b0 + f.by * y0 - f.min;
-        if (a_ == 0) {
-            n_ = n; // the row is inside when n >= 0
-            dn_ = f.by * step;
-            return;
-        }
-        d_ = a_ > 0 ? a_ : -a_;
         q_ = floor_div(n, d_);
         r_ = n - q_ * d_;
         const std::int64_t k = f.by * step;
         kq_ = floor_div(k, d_);
         kr_ = k - kq_ * d_;
     }
-    // Narrows [lo, hi] to the x the edge allows on the current row.
-    void clip(std::int64_t& lo, std::int64_t& hi) const {
-        if (a_ > 0) {
-            lo = std::max(lo, -q_);
-        } else if (a_ < 0) {
-            hi = std::min(hi, q_);
-        } else if (n_ < 0) {
-            hi = lo - 1;
-        }
-    }
+    std::int64_t bound() const { return sign_ * q_; }
     // Moves to the next visited row (y + step).
     void next() {
-        if (a_ == 0) {
-            n_ += dn_;
-            return;
-        }
         q_ += kq_;
         r_ += kr_; // both remainders in [0, d), so one carry at most
         if (r_ >= d_) {
@@ -81,15 +64,23 @@ public:
     }
 
 private:
-    std::int64_t a_;
-    bool inclusive_;          // min == 0: the edge's own samples are in
-    std::int64_t n_, dn_ = 0; // a == 0: value - min on the row, its step
-    std::int64_t d_ = 1, q_ = 0, r_ = 0, kq_ = 0, kr_ = 0; // a != 0
+    std::int64_t sign_ = 1, d_ = 1, q_ = 0, r_ = 0, kq_ = 0, kr_ = 0;
 };
 
 // How many visited rows ahead scan_rows prefetches.
 constexpr std::int64_t kAhead = 2;
 
+// The span of every row is cut by one left and one right edge. A triangle has one long edge
+// from its top to its bottom vertex on one side and two edges meeting at its middle vertex on
+// the other; on a row above (below) the middle vertex only the upper (lower) of the two can
+// bind, since two edge lines cross only on the middle vertex's row. A
+// horizontal edge binds only its own row: that row is out when the edge's samples are not
+// owned, and otherwise every sample of it lies on the edge.
+//
+// Within a row's span only the first and the last sample can lie on an edge (an edge function
+// grows strictly away from the side it bounds), except on the row of a horizontal edge. So the
+// interior samples take the inside formula with no test, and the two ends (and that row) are
+// classified exactly.
 template <bool kMasked>
 TriangleStats scan_rows(const HeightGrid& grid,
                         double eps,
@@ -100,9 +91,10 @@ TriangleStats scan_rows(const HeightGrid& grid,
                         std::int64_t step) {
     const int w = grid.width;
     const int h = grid.height;
-    const EdgeFn fa(b, c, owns_edge_samples(b, c, w, h)); // weight of a
-    const EdgeFn fb(c, a, owns_edge_samples(c, a, w, h)); // weight of b
-    const EdgeFn fc(a, b, owns_edge_samples(a, b, w, h)); // weight of c
+    const EdgeFn fn[3] = {EdgeFn(b, c, owns_edge_samples(b, c, w, h)),  // weight of a
+                          EdgeFn(c, a, owns_edge_samples(c, a, w, h)),  // weight of b
+                          EdgeFn(a, b, owns_edge_samples(a, b, w, h))}; // weight of c
+    const GridPoint from[3] = {b, c, a}, to[3] = {c, a, b};
     const double za = grid.at(a.x, a.y);
     const double zb = grid.at(b.x, b.y);
     const double zc = grid.at(c.x, c.y);
@@ -115,38 +107,109 @@ TriangleStats scan_rows(const HeightGrid& grid,
     const auto finish = [&] {
         return TriangleStats{error_points, samples, total_error, worst_error, worst_sample};
     };
-    const std::int64_t xmin = std::min({a.x, b.x, c.x});
-    const std::int64_t xmax = std::max({a.x, b.x, c.x});
     const std::int64_t ymin = std::min({a.y, b.y, c.y});
     const std::int64_t ymax = std::max({a.y, b.y, c.y});
     const std::int64_t first_row = ymin + (step - ymin % step) % step;
+    if (first_row > ymax) {
+        return finish();
+    }
+    // The edges: left ones (a > 0) bound x from below, right ones (a < 0) from above. With two
+    // on one side, [0] is the upper (smaller y) and [1] the lower; the middle row ymid is
+    // where they meet. A horizontal edge's row is hrow; hrow_on says its samples are owned.
+    int left[2] = {-1, -1}, right[2] = {-1, -1}, nl = 0, nr = 0;
+    std::int64_t hrow = -1;
+    bool hrow_on = false;
+    for (int k = 0; k < 3; ++k) {
+        if (fn[k].a > 0) {
+            left[nl++] = k;
+        } else if (fn[k].a < 0) {
+            right[nr++] = k;
+        } else {
+            hrow = from[k].y;
+            hrow_on = fn[k].min == 0;
+        }
+    }
+    const auto top_y = [&](int k) { return std::min(from[k].y, to[k].y); };
+    std::int64_t ymid = ymax; // rows <= ymid use the [0] edges, rows >= ymid the [1] edges
+    if (nl == 2) {
+        if (top_y(left[0]) > top_y(left[1])) {
+            std::swap(left[0], left[1]);
+        }
+        ymid = std::max(from[left[0]].y, to[left[0]].y);
+        right[1] = right[0];
+    } else if (nr == 2) {
+        if (top_y(right[0]) > top_y(right[1])) {
+            std::swap(right[0], right[1]);
+        }
+        ymid = std::max(from[right[0]].y, to[right[0]].y);
+        left[1] = left[0];
+    } else {
+        left[1] = left[0];
+        right[1] = right[0];
+    }
+    // Per visited sample along a row and per visited row: the weights' steps.
+    const double sa = static_cast<double>(fn[0].a * step), sb = static_cast<double>(fn[1].a * step),
+                 sc = static_cast<double>(fn[2].a * step);
+    const std::int64_t da = fn[0].by * step, db = fn[1].by * step, dc = fn[2].by * step;
+    // The weights at x = 0 on row y (b0 + by * y), stepped exactly from row to row.
+    std::int64_t ra = fn[0].b0 + fn[0].by * first_row, rb = fn[1].b0 + fn[1].by * first_row,
+                 rc = fn[2].b0 + fn[2].by * first_row;
     const auto align = [step](std::int64_t x) {
         return step == 1 ? x : x + (step - x % step) % step;
     };
-    RowBound ba(fa, first_row, step), bb(fb, first_row, step), bc(fc, first_row, step);
-    // Per visited sample along a row and per visited row: the weights' steps.
-    const double sa = static_cast<double>(fa.a * step), sb = static_cast<double>(fb.a * step),
-                 sc = static_cast<double>(fc.a * step);
-    const std::int64_t da = fa.by * step, db = fb.by * step, dc = fc.by * step;
-    // The weights at x = 0 on row y (b0 + by * y), stepped exactly from row to row.
-    std::int64_t ra = fa.b0 + fa.by * first_row, rb = fb.b0 + fb.by * first_row,
-                 rc = fc.b0 + fc.by * first_row;
+    // The first visited row from which the two-edge side is cut by its lower edge. On the
+    // middle row itself the upper one excludes at most the middle vertex, never scanned.
+    const std::int64_t switch_row =
+        left[1] != left[0] || right[1] != right[0] ? ymid + (step - ymid % step) % step : INT64_MAX;
+    // The mesh height z at sample (x, y) of the closed triangle, from its weights there; false
+    // at a vertex (error 0 by definition, not counted). Off the hot path: only span ends and
+    // horizontal edges come here.
+    const auto surface =
+        [&](std::int64_t x, std::int64_t y, double wa, double wb, double wc, double& z) {
+            if (wa > 0 && wb > 0 && wc > 0) {
+                z = interpolate_inside(wa, wb, wc, za, zb, zc, inv_area);
+                return true;
+            }
+            const GridPoint p{static_cast<std::int32_t>(x), static_cast<std::int32_t>(y)};
+            if (p == a || p == b || p == c) {
+                return false;
+            }
+            z = interpolate(a,
+                            za,
+                            b,
+                            zb,
+                            c,
+                            zc,
+                            static_cast<std::int64_t>(wa),
+                            static_cast<std::int64_t>(wb),
+                            static_cast<std::int64_t>(wc),
+                            inv_area,
+                            p);
+            return true;
+        };
+    RowBound lb(fn[left[0]], first_row, step), rbd(fn[right[0]], first_row, step);
     for (std::int64_t y = first_row; y <= ymax;
-         y += step, ba.next(), bb.next(), bc.next(), ra += da, rb += db, rc += dc) {
-        std::int64_t lo = xmin;
-        std::int64_t hi = xmax;
-        ba.clip(lo, hi);
-        bb.clip(lo, hi);
-        bc.clip(lo, hi);
-        lo = align(lo);
+         y += step, lb.next(), rbd.next(), ra += da, rb += db, rc += dc) {
+        if (y == switch_row) {
+            if (left[1] != left[0]) {
+                lb = RowBound(fn[left[1]], y, step);
+            } else {
+                rbd = RowBound(fn[right[1]], y, step);
+            }
+        }
+        if (y == hrow && !hrow_on) {
+            continue;
+        }
+        const std::int64_t lo = align(lb.bound());
+        const std::int64_t hi = rbd.bound();
         if (lo > hi) {
             continue;
         }
         const std::int64_t last = step == 1 ? hi : lo + (hi - lo) / step * step; // last visited
         // The weights are integers below 2^53, so doubles hold and step them exactly.
-        double wa = static_cast<double>(fa.a * lo + ra);
-        double wb = static_cast<double>(fb.a * lo + rb);
-        double wc = static_cast<double>(fc.a * lo + rc);
+        double wa = static_cast<double>(fn[0].a * lo + ra);
+        double wb = static_cast<double>(fn[1].a * lo + rb);
+        double wc = static_cast<double>(fn[2].a * lo + rc);
         const std::size_t row = static_cast<std::size_t>(y) * static_cast<std::size_t>(w);
         const float* heights = grid.heights.data() + row;
         // Rows are a grid width apart in memory, too far for the hardware prefetcher: ask for
@@ -158,7 +221,8 @@ TriangleStats scan_rows(const HeightGrid& grid,
         }
         const std::uint8_t* valid = kMasked ? grid.valid.data() + row : nullptr;
         // Records the error of sample x; true when the scan must stop (stats then partial).
-        const auto record = [&](std::int64_t x, double z) {
+        // Inlined, so that the running stats stay in registers.
+        const auto record = [&](std::int64_t x, double z) __attribute__((always_inline)) {
             const double err = std::abs(z - static_cast<double>(heights[x]));
             ++samples;
             total_error += err;
@@ -175,40 +239,42 @@ TriangleStats scan_rows(const HeightGrid& grid,
             gate = std::min(worst_error, eps);
             return false;
         };
-        // Visits the samples x = from, from + step, ..., to of the row, in increasing x.
-        const auto visit = [&](std::int64_t from, std::int64_t to) {
-            for (std::int64_t x = from; x <= to; x += step, wa += sa, wb += sb, wc += sc) {
-                if (kMasked && valid[x] == 0) {
-                    continue;
-                }
-                double z;
-                if (wa > 0 && wb > 0 && wc > 0) {
-                    z = interpolate_inside(wa, wb, wc, za, zb, zc, inv_area);
-                } else {
-                    // On an owned edge, or a vertex (error 0 by definition, not counted).
-                    const GridPoint p{static_cast<std::int32_t>(x), static_cast<std::int32_t>(y)};
-                    if (p == a || p == b || p == c) {
-                        continue;
-                    }
-                    z = interpolate(a,
-                                    za,
-                                    b,
-                                    zb,
-                                    c,
-                                    zc,
-                                    static_cast<std::int64_t>(wa),
-                                    static_cast<std::int64_t>(wb),
-                                    static_cast<std::int64_t>(wc),
-                                    inv_area,
-                                    p);
-                }
-                if (record(x, z)) {
-                    return true;
+        // Sample x at the current weights, anywhere in the closed triangle.
+        const auto classify = [&](std::int64_t x) __attribute__((always_inline)) {
+            if (kMasked && valid[x] == 0) {
+                return false;
+            }
+            double z;
+            if (!surface(x, y, wa, wb, wc, z)) {
+                return false;
+            }
+            return record(x, z);
+        };
+        if (y == hrow) {
+            // Every sample of the row lies on the horizontal edge.
+            for (std::int64_t x = lo; x <= last; x += step, wa += sa, wb += sb, wc += sc) {
+                if (classify(x)) {
+                    return finish();
                 }
             }
-            return false;
-        };
-        if (visit(lo, last)) {
+            continue;
+        }
+        if (classify(lo)) {
+            return finish();
+        }
+        if (last == lo) {
+            continue;
+        }
+        wa += sa, wb += sb, wc += sc;
+        for (std::int64_t x = lo + step; x < last; x += step, wa += sa, wb += sb, wc += sc) {
+            if (kMasked && valid[x] == 0) {
+                continue;
+            }
+            if (record(x, interpolate_inside(wa, wb, wc, za, zb, zc, inv_area))) {
+                return finish();
+            }
+        }
+        if (classify(last)) {
             return finish();
         }
     }
