@@ -44,27 +44,30 @@ class RowBound {
 public:
     RowBound() = default;
     RowBound(const EdgeFn& f, std::int64_t y0, std::int64_t step)
-        : sign_(f.a > 0 ? -1 : 1), d_(f.a > 0 ? f.a : -f.a) {
+        : d_(f.a > 0 ? f.a : -f.a), carry_(f.a > 0 ? -1 : 1) {
         const std::int64_t n = f.b0 + f.by * y0 - f.min;
-        q_ = floor_div(n, d_);
-        r_ = n - q_ * d_;
+        const std::int64_t q = floor_div(n, d_);
+        r_ = n - q * d_;
         const std::int64_t k = f.by * step;
-        kq_ = floor_div(k, d_);
-        kr_ = k - kq_ * d_;
+        const std::int64_t kq = floor_div(k, d_);
+        kr_ = k - kq * d_;
+        bound_ = carry_ * q;
+        step_ = carry_ * kq;
     }
-    std::int64_t bound() const { return sign_ * q_; }
-    // Moves to the next visited row (y + step).
+    std::int64_t bound() const { return bound_; }
+    // Moves to the next visited row (y + step): q grows by floor(k / d) plus a carry.
     void next() {
-        q_ += kq_;
+        bound_ += step_;
         r_ += kr_; // both remainders in [0, d), so one carry at most
         if (r_ >= d_) {
             r_ -= d_;
-            ++q_;
+            bound_ += carry_;
         }
     }
 
 private:
-    std::int64_t sign_ = 1, d_ = 1, q_ = 0, r_ = 0, kq_ = 0, kr_ = 0;
+    std::int64_t d_ = 1, carry_ = 1; // |a|; +1 for a right edge (bound q), -1 for a left (-q)
+    std::int64_t r_ = 0, kr_ = 0, bound_ = 0, step_ = 0;
 };
 
 // How many visited rows ahead scan_rows prefetches.
@@ -102,8 +105,6 @@ TriangleStats scan_rows(const HeightGrid& grid,
     // Running stats in locals (registers in the hot loop); finish() packs them.
     std::int64_t samples = 0, error_points = 0, worst_sample = -1;
     double total_error = 0.0, worst_error = 0.0;
-    // min(worst_error, eps): a sample whose error is not above it only adds to the sums.
-    double gate = 0.0;
     const auto finish = [&] {
         return TriangleStats{error_points, samples, total_error, worst_error, worst_sample};
     };
@@ -226,18 +227,13 @@ TriangleStats scan_rows(const HeightGrid& grid,
             const double err = std::abs(z - static_cast<double>(heights[x]));
             ++samples;
             total_error += err;
-            if (err <= gate) {
-                return false; // the common case: neither a new worst nor an error point
-            }
+            // Counted without a branch: at coarse eps error points and clean samples mix.
+            error_points += err > eps ? 1 : 0;
             if (err > worst_error) {
                 worst_error = err;
                 worst_sample = static_cast<std::int64_t>(row) + x;
             }
-            if (err > eps && ++error_points >= stop_at) {
-                return true;
-            }
-            gate = std::min(worst_error, eps);
-            return false;
+            return error_points >= stop_at;
         };
         // Sample x at the current weights, anywhere in the closed triangle.
         const auto classify = [&](std::int64_t x) __attribute__((always_inline)) {
