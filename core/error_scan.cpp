@@ -84,14 +84,16 @@ constexpr std::int64_t kAhead = 2;
 // grows strictly away from the side it bounds), except on the row of a horizontal edge. So the
 // interior samples take the inside formula with no test, and the two ends (and that row) are
 // classified exactly.
-template <bool kMasked>
+template <bool kMasked, bool kUnit>
 TriangleStats scan_rows(const HeightGrid& grid,
                         double eps,
                         GridPoint a,
                         GridPoint b,
                         GridPoint c,
                         std::int64_t stop_at,
-                        std::int64_t step) {
+                        std::int64_t stride) {
+    // kUnit: every sample (the split agent's scans); the constant step folds away.
+    const std::int64_t step = kUnit ? 1 : stride;
     const int w = grid.width;
     const int h = grid.height;
     const EdgeFn fn[3] = {EdgeFn(b, c, owns_edge_samples(b, c, w, h)),  // weight of a
@@ -286,9 +288,14 @@ TriangleStats scan_triangle(const HeightGrid& grid,
                             GridPoint c,
                             std::int64_t stop_at,
                             int stride) {
-    // Masked and unmasked grids get separate loops: the validity test leaves the hot path.
-    return grid.valid.empty() ? scan_rows<false>(grid, eps, a, b, c, stop_at, stride)
-                              : scan_rows<true>(grid, eps, a, b, c, stop_at, stride);
+    // Masked and unmasked grids, full and strided scans get separate loops: the validity test
+    // and the stride arithmetic leave the hot path.
+    if (grid.valid.empty()) {
+        return stride == 1 ? scan_rows<false, true>(grid, eps, a, b, c, stop_at, 1)
+                           : scan_rows<false, false>(grid, eps, a, b, c, stop_at, stride);
+    }
+    return stride == 1 ? scan_rows<true, true>(grid, eps, a, b, c, stop_at, 1)
+                       : scan_rows<true, false>(grid, eps, a, b, c, stop_at, stride);
 }
 
 } // namespace tb::core
