@@ -57,12 +57,13 @@ public:
     std::int64_t bound() const { return bound_; }
     // Moves to the next visited row (y + step): q grows by floor(k / d) plus a carry.
     void next() {
-        bound_ += step_;
-        r_ += kr_; // both remainders in [0, d), so one carry at most
-        if (r_ >= d_) {
-            r_ -= d_;
-            bound_ += carry_;
-        }
+        // Both remainders are in [0, d), so one carry at most. Without a branch: the carry
+        // pattern of a slope is irregular, and a mispredicted jump per row and edge costs more
+        // than the row's samples.
+        r_ += kr_;
+        const std::int64_t carry = -static_cast<std::int64_t>(r_ >= d_); // all ones or zero
+        r_ -= d_ & carry;
+        bound_ += step_ + (carry_ & carry);
     }
 
 private:
