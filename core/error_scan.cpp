@@ -85,7 +85,7 @@ constexpr std::int64_t kAhead = 2;
 // grows strictly away from the side it bounds), except on the row of a horizontal edge. So the
 // interior samples take the inside formula with no test, and the two ends (and that row) are
 // classified exactly.
-template <bool kMasked, bool kUnit>
+template <bool kMasked, int kStep>
 TriangleStats scan_rows(const HeightGrid& grid,
                         double eps,
                         GridPoint a,
@@ -93,8 +93,9 @@ TriangleStats scan_rows(const HeightGrid& grid,
                         GridPoint c,
                         std::int64_t stop_at,
                         std::int64_t stride) {
-    // kUnit: every sample (the split agent's scans); the constant step folds away.
-    const std::int64_t step = kUnit ? 1 : stride;
+    // kStep > 0: the stride is that constant, so its divisions and remainders per row fold
+    // into shifts (1: the split agent's full scans, 2: the merge agent's estimates); 0: any.
+    const std::int64_t step = kStep > 0 ? kStep : stride;
     const int w = grid.width;
     const int h = grid.height;
     const EdgeFn fn[3] = {EdgeFn(b, c, owns_edge_samples(b, c, w, h)),  // weight of a
@@ -289,14 +290,20 @@ TriangleStats scan_triangle(const HeightGrid& grid,
                             GridPoint c,
                             std::int64_t stop_at,
                             int stride) {
-    // Masked and unmasked grids, full and strided scans get separate loops: the validity test
+    // Masked and unmasked grids and the common strides get separate loops: the validity test
     // and the stride arithmetic leave the hot path.
-    if (grid.valid.empty()) {
-        return stride == 1 ? scan_rows<false, true>(grid, eps, a, b, c, stop_at, 1)
-                           : scan_rows<false, false>(grid, eps, a, b, c, stop_at, stride);
+    const bool masked = !grid.valid.empty();
+    switch (stride) {
+    case 1:
+        return masked ? scan_rows<true, 1>(grid, eps, a, b, c, stop_at, 1)
+                      : scan_rows<false, 1>(grid, eps, a, b, c, stop_at, 1);
+    case 2:
+        return masked ? scan_rows<true, 2>(grid, eps, a, b, c, stop_at, 2)
+                      : scan_rows<false, 2>(grid, eps, a, b, c, stop_at, 2);
+    default:
+        return masked ? scan_rows<true, 0>(grid, eps, a, b, c, stop_at, stride)
+                      : scan_rows<false, 0>(grid, eps, a, b, c, stop_at, stride);
     }
-    return stride == 1 ? scan_rows<true, true>(grid, eps, a, b, c, stop_at, 1)
-                       : scan_rows<true, false>(grid, eps, a, b, c, stop_at, stride);
 }
 
 } // namespace tb::core
