@@ -37,6 +37,75 @@ TEST_CASE("the 1-D fit has the brute-force optimal count on random sequences (se
     }
 }
 
+namespace {
+
+// Fewest breakpoints as a shortest path over every segment brute::fits accepts (and no longer
+// than max_step): the optimum brute::optimal_breakpoints enumerates, in O(n^3), so that long
+// scan lines can be judged.
+int shortest_chain(const std::vector<float>& z,
+                   const std::vector<std::uint8_t>& valid,
+                   double eps,
+                   int max_step) {
+    const int n = static_cast<int>(z.size());
+    std::vector<int> best(static_cast<std::size_t>(n), n + 1);
+    best[0] = 1;
+    for (int j = 1; j < n; ++j) {
+        for (int i = std::max(0, j - max_step); i < j; ++i) {
+            if (best[static_cast<std::size_t>(i)] + 1 < best[static_cast<std::size_t>(j)] &&
+                brute::fits(z, valid, eps, i, j)) {
+                best[static_cast<std::size_t>(j)] = best[static_cast<std::size_t>(i)] + 1;
+            }
+        }
+    }
+    return best[static_cast<std::size_t>(n - 1)];
+}
+
+} // namespace
+
+TEST_CASE("the 1-D fit is optimal on long scan lines at coarse eps (seeds 1-40)") {
+    // Slow drifts with flat steps and rare spikes: eps tunnels run over tens to hundreds of
+    // samples, and close anywhere along them.
+    int longest = 0;
+    for (std::uint64_t seed = 1; seed <= 40; ++seed) {
+        terrain::Lcg r(seed);
+        const int n = 40 + static_cast<int>(r.next() * 160);
+        std::vector<float> z;
+        std::vector<std::uint8_t> valid;
+        const bool masked = seed % 3 == 0;
+        double h = 0.0;
+        double drift = r.next() - 0.5;
+        for (int k = 0; k < n; ++k) {
+            const double u = r.next();
+            if (u < 0.05) {
+                drift = r.next() - 0.5;
+            } else if (u > 0.3) {
+                h += drift + 0.4 * (r.next() - 0.5);
+            }
+            z.push_back(terrain::quantize(r.next() < 0.02 ? h + 40.0 * (r.next() - 0.5) : h));
+            if (masked) {
+                valid.push_back(r.next() < 0.8 ? 1 : 0);
+            }
+        }
+        // Non-dyadic eps keeps samples off the exact tunnel wall.
+        const double eps = 1.3 + 7.1 * r.next();
+        const int max_step = seed % 4 == 0 ? 3 + static_cast<int>(r.next() * 40) : 0;
+        const int reach = max_step > 0 ? max_step : n;
+        const auto chain = tb::core::fit_breakpoints(z, valid, eps, max_step);
+        INFO("seed=", seed, " n=", n, " eps=", eps, " max_step=", max_step);
+        REQUIRE(chain.front() == 0);
+        REQUIRE(chain.back() == n - 1);
+        for (std::size_t s = 1; s < chain.size(); ++s) {
+            CHECK(chain[s - 1] < chain[s]);
+            CHECK(chain[s] - chain[s - 1] <= reach);
+            CHECK(brute::fits(z, valid, eps, chain[s - 1], chain[s]));
+            longest = std::max(longest, chain[s] - chain[s - 1]);
+        }
+        CHECK(static_cast<int>(chain.size()) == shortest_chain(z, valid, eps, reach));
+    }
+    // The lines did hold long tunnels.
+    CHECK(longest >= 60);
+}
+
 TEST_CASE("the 1-D fit has the optimal count on hand-made cases") {
     using V = std::vector<float>;
     const std::vector<std::uint8_t> all;
