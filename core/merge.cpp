@@ -149,7 +149,10 @@ bool Refiner::try_remove(Index v, std::vector<Index>& ring) {
     auto& state = scratch_.state;
     state.assign(n * n * n, kUnknown);
     auto& estimate = scratch_.estimate;
-    estimate.resize(n * n * n);
+    // Read only where state says it was written: grow, never shrink and refill.
+    if (estimate.size() < n * n * n) {
+        estimate.resize(n * n * n);
+    }
     auto& exact = scratch_.exact;
     exact.clear();
     const auto cost = [&](int i, int j, int k) -> std::optional<TriangleCost> {
