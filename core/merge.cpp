@@ -112,13 +112,28 @@ bool Refiner::try_remove(Index v, std::vector<Index>& ring) {
             return false;
         }
     }
-    // Whether a candidate triangle honours v, if it covers v: an O(1) test before any scan.
+    // orient2d(pts[i], pts[j], pv) for i < j: the weights of v in every candidate triangle,
+    // computed once per pair instead of three times per triangle.
+    auto& toward_v = scratch_.toward_v;
+    if (v_counts) {
+        toward_v.resize(n * n);
+        for (std::size_t i = 0; i < n; ++i) {
+            for (std::size_t j = i + 1; j < n; ++j) {
+                toward_v[i * n + j] = orient2d(pts[i], pts[j], pv);
+            }
+        }
+    }
+    // Whether a candidate triangle (i < j < k) honours v, if it covers v: an O(1) test before
+    // any scan.
     const auto honours_v = [&](int i, int j, int k, bool& covers) {
         const GridPoint a = pts[static_cast<std::size_t>(i)];
         const GridPoint b = pts[static_cast<std::size_t>(j)];
         const GridPoint c = pts[static_cast<std::size_t>(k)];
-        const std::int64_t wa = orient2d(b, c, pv), wb = orient2d(c, a, pv),
-                           wc = orient2d(a, b, pv);
+        const auto at = [&](int r, int q) {
+            return toward_v[static_cast<std::size_t>(r) * n + static_cast<std::size_t>(q)];
+        };
+        // orient2d(b, c, pv), orient2d(c, a, pv) = -orient2d(a, c, pv), orient2d(a, b, pv).
+        const std::int64_t wa = at(j, k), wb = -at(i, k), wc = at(i, j);
         covers = wa >= 0 && wb >= 0 && wc >= 0 && orient2d(a, b, c) > 0;
         if (!covers) {
             return true;

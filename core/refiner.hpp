@@ -99,6 +99,7 @@ private:
         std::vector<TriangleCost> estimate;
         std::vector<std::pair<std::size_t, TriangleStats>> exact;
         std::vector<std::int8_t> side;
+        std::vector<std::int64_t> toward_v;
         PolygonDpScratch dp;
     } scratch_;
 };
