@@ -77,9 +77,9 @@ constexpr std::int64_t kAhead = 2;
 // The span of every row is cut by one left and one right edge. A triangle has one long edge
 // from its top to its bottom vertex on one side and two edges meeting at its middle vertex on
 // the other; on a row above (below) the middle vertex only the upper (lower) of the two can
-// bind, since two edge lines cross only on the middle vertex's row. A
-// horizontal edge binds only its own row: that row is out when the edge's samples are not
-// owned, and otherwise every sample of it lies on the edge.
+// bind, since two edge lines cross only on the middle vertex's row. A horizontal edge binds
+// only its own row: that row is out when the edge's samples are not owned, and otherwise every
+// sample of it lies on the edge.
 //
 // Within a row's span only the first and the last sample can lie on an edge (an edge function
 // grows strictly away from the side it bounds), except on the row of a horizontal edge. So the
@@ -134,22 +134,21 @@ TriangleStats scan_rows(const HeightGrid& grid,
             hrow_on = fn[k].min == 0;
         }
     }
-    const auto top_y = [&](int k) { return std::min(from[k].y, to[k].y); };
-    std::int64_t ymid = ymax; // rows <= ymid use the [0] edges, rows >= ymid the [1] edges
-    if (nl == 2) {
-        if (top_y(left[0]) > top_y(left[1])) {
-            std::swap(left[0], left[1]);
+    // Rows above ymid use the [0] edges, rows from ymid on the [1] edges; a side with one edge
+    // uses it throughout.
+    std::int64_t ymid = ymax;
+    int* pair = nl == 2 ? left : (nr == 2 ? right : nullptr);
+    if (pair != nullptr) {
+        const auto top_y = [&](int k) { return std::min(from[k].y, to[k].y); };
+        if (top_y(pair[0]) > top_y(pair[1])) {
+            std::swap(pair[0], pair[1]);
         }
-        ymid = std::max(from[left[0]].y, to[left[0]].y);
-        right[1] = right[0];
-    } else if (nr == 2) {
-        if (top_y(right[0]) > top_y(right[1])) {
-            std::swap(right[0], right[1]);
-        }
-        ymid = std::max(from[right[0]].y, to[right[0]].y);
+        ymid = std::max(from[pair[0]].y, to[pair[0]].y);
+    }
+    if (nl == 1) {
         left[1] = left[0];
-    } else {
-        left[1] = left[0];
+    }
+    if (nr == 1) {
         right[1] = right[0];
     }
     // Per visited sample along a row and per visited row: the weights' steps.
@@ -165,7 +164,7 @@ TriangleStats scan_rows(const HeightGrid& grid,
     // The first visited row from which the two-edge side is cut by its lower edge. On the
     // middle row itself the upper one excludes at most the middle vertex, never scanned.
     const std::int64_t switch_row =
-        left[1] != left[0] || right[1] != right[0] ? ymid + (step - ymid % step) % step : INT64_MAX;
+        pair != nullptr ? ymid + (step - ymid % step) % step : INT64_MAX;
     // The mesh height z at sample (x, y) of the closed triangle, from its weights there; false
     // at a vertex (error 0 by definition, not counted). Off the hot path: only span ends and
     // horizontal edges come here.
@@ -196,11 +195,7 @@ TriangleStats scan_rows(const HeightGrid& grid,
     for (std::int64_t y = first_row; y <= ymax;
          y += step, lb.next(), rbd.next(), ra += da, rb += db, rc += dc) {
         if (y == switch_row) {
-            if (left[1] != left[0]) {
-                lb = RowBound(fn[left[1]], y, step);
-            } else {
-                rbd = RowBound(fn[right[1]], y, step);
-            }
+            (pair == left ? lb : rbd) = RowBound(fn[pair[1]], y, step);
         }
         if (y == hrow && !hrow_on) {
             continue;
