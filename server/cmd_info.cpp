@@ -37,7 +37,8 @@ std::string describe(const tiler::DemInfo& d) {
     }
     out << "  heights:     ";
     if (d.has_data) {
-        out << d.min_height << " .. " << d.max_height << "\n";
+        out << d.min_height << " .. " << d.max_height
+            << (d.range_exact ? "\n" : " (approximate: too large to read whole)\n");
     } else {
         out << "no valid sample (every sample is nodata)\n";
     }

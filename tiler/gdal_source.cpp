@@ -40,7 +40,7 @@ void init_gdal() {
     });
 }
 
-DemInfo inspect_dem(const std::string& path) {
+DemInfo inspect_dem(const std::string& path, double exact_range_samples) {
     init_gdal();
     namespace fs = std::filesystem;
     const bool virtual_path = path.rfind("/vsi", 0) == 0 || path.find('<') != std::string::npos;
@@ -159,9 +159,18 @@ DemInfo inspect_dem(const std::string& path) {
     }
 
     // Exact min/max over valid samples (metadata statistics are not trusted: some files carry
-    // stale ones). Above ~64 Mpixel fall back to GDAL's approximate pass over overviews.
+    // stale ones). Tileset bounding volumes are built from it, so an approximate range is only
+    // taken where reading everything would hold up every start for long.
     double minmax[2] = {0, 0};
-    const bool approx = static_cast<double>(info.width) * info.height > 64e6;
+    const double samples = static_cast<double>(info.width) * info.height;
+    const bool approx = samples > exact_range_samples;
+    info.range_exact = !approx;
+    if (!approx && samples > 64e6) {
+        const bool mosaic = path.find('<') != std::string::npos; // a VRT description
+        log::info((mosaic ? std::string("the mosaic") : path) + ": reading all " +
+                  std::to_string(std::llround(samples / 1e6)) +
+                  " Mpixel once for the exact height range");
+    }
     CPLErrorReset();
     if (band->ComputeRasterMinMax(approx, minmax) == CE_None) {
         info.has_data = true;

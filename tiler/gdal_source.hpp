@@ -26,15 +26,22 @@ struct DemInfo {
     std::array<double, 6> geotransform{0, 1, 0, 0, 0, 1};
     std::optional<double> nodata;
     double scale = 1.0, offset = 0.0;
-    bool has_data = false;                              // false when every sample is nodata
-    double min_height = 0, max_height = 0;              // over valid samples, after scale/offset
+    bool has_data = false;                 // false when every sample is nodata
+    double min_height = 0, max_height = 0; // over valid samples, after scale/offset
+    bool range_exact = true; // min/max read from every sample, not GDAL's approximate pass
     std::optional<std::array<double, 4>> lonlat_bounds; // west, south, east, north (degrees)
     double resolution_m = 0; // approximate ground size of one pixel, metres
 };
 
+// Up to this many samples inspect_dem reads every block for the exact height range (about a
+// second per 100 Mpixel of a compressed GeoTIFF here); above it GDAL's approximate pass over
+// overviews or a subsample, which can miss the extremes.
+inline constexpr double kExactRangeSamples = 1e9;
+
 // Opens `path` read-only and describes band 1 (statistics computed from the data, not from
-// metadata). Throws InputError naming the path: missing file, a directory, not a raster.
-DemInfo inspect_dem(const std::string& path);
+// metadata; exact up to exact_range_samples samples). Throws InputError naming the path:
+// missing file, a directory, not a raster.
+DemInfo inspect_dem(const std::string& path, double exact_range_samples = kExactRangeSamples);
 
 // Registers GDAL drivers once and routes GDAL's error handler to our logger. Idempotent.
 void init_gdal();

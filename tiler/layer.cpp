@@ -7,6 +7,7 @@
 #include "tiler/encode.hpp"
 #include "tiler/gdal_source.hpp"
 #include "tiler/geoid.hpp"
+#include "tiler/log.hpp"
 
 #include <unistd.h>
 
@@ -207,6 +208,17 @@ private:
     void compute_height_range() {
         const DemInfo& info = source_->info();
         double lo = info.min_height, hi = info.max_height;
+        if (!info.range_exact) {
+            // GDAL's approximate pass can miss the extremes, and a bounding volume that does
+            // not hold the surface makes clients cull tiles they should draw. Take in the
+            // Earth's whole relief instead (Challenger Deep to Everest, orthometric).
+            log::warn(info.path + ": height range " + std::to_string(std::llround(lo)) + " .. " +
+                      std::to_string(std::llround(hi)) +
+                      " m is approximate (too large to read whole); tileset bounding volumes "
+                      "span -11100 .. 8900 m instead");
+            lo = std::min(lo, -11100.0);
+            hi = std::max(hi, 8900.0);
+        }
         // Voids (nodata, or bounding-box corners of a projected DEM) may lie at 0 m orthometric.
         if (info.nodata || !info.geographic) {
             lo = std::min(lo, 0.0);

@@ -10,6 +10,7 @@
 #include <doctest/doctest.h>
 
 #include <cmath>
+#include <fstream>
 #include <future>
 #include <thread>
 
@@ -228,4 +229,49 @@ TEST_CASE("a max_zoom below the native zoom scales the default eps to that zoom'
     const TileRange r = layer->tiles_at(8);
     const std::string glb = layer->make_tile({8, r.x0, r.y0}, Format::Glb, {});
     CHECK(glb.size() > 1000);
+}
+
+TEST_CASE("a DEM too large to read whole gets bounding volumes over the Earth's whole relief") {
+    ScratchDir dir;
+    // 64 x 64 samples of 100 m with one spike of 5000 m, over a degree square.
+    Fixture small;
+    small.width = small.height = 64;
+    small.values.assign(64 * 64, 100.0);
+    small.values[static_cast<std::size_t>(37 * 64 + 21)] = 5000.0;
+    small.geotransform = std::array<double, 6>{10, 1.0 / 64, 0, 46, 0, -1.0 / 64};
+    small.epsg = 4326;
+    const std::string tif = tb_test::write_fixture(dir.file("small.tif"), small);
+
+    // Up to the limit the range is exact, spike included; below it GDAL's pass is approximate.
+    const DemInfo exact = inspect_dem(tif);
+    CHECK(exact.range_exact);
+    CHECK(exact.min_height == 100.0);
+    CHECK(exact.max_height == 5000.0);
+    CHECK_FALSE(inspect_dem(tif, 1000).range_exact);
+
+    // The same square stretched to 40000 x 40000 samples (1.6 Gpixel) by a VRT: above the
+    // limit. Each spike sample grows to a block of about 625 x 625.
+    const std::string vrt = dir.file("huge.vrt");
+    {
+        std::ofstream out(vrt);
+        out << "<VRTDataset rasterXSize=\"40000\" rasterYSize=\"40000\"><SRS>EPSG:4326</SRS>"
+               "<GeoTransform>10, 0.000025, 0, 46, 0, -0.000025</GeoTransform>"
+               "<VRTRasterBand dataType=\"Float32\" band=\"1\"><SimpleSource>"
+               "<SourceFilename relativeToVRT=\"0\">"
+            << tif
+            << "</SourceFilename><SourceBand>1</SourceBand>"
+               "<SrcRect xOff=\"0\" yOff=\"0\" xSize=\"64\" ySize=\"64\"/>"
+               "<DstRect xOff=\"0\" yOff=\"0\" xSize=\"40000\" ySize=\"40000\"/>"
+               "</SimpleSource></VRTRasterBand></VRTDataset>";
+    }
+    CHECK_FALSE(inspect_dem(vrt).range_exact);
+    const auto layer = open_layer({vrt}, Scheme::Geodetic, VerticalDatum::Ellipsoid);
+    CHECK(layer->min_height() <= -11100.0);
+    CHECK(layer->max_height() >= 8900.0);
+    // An exact source keeps its own range: bounding volumes stay tight.
+    const auto tight = open_layer({tif}, Scheme::Geodetic, VerticalDatum::Ellipsoid);
+    CHECK(tight->min_height() < 100.0);
+    CHECK(tight->min_height() > 90.0);
+    CHECK(tight->max_height() > 5000.0);
+    CHECK(tight->max_height() < 5010.0);
 }
