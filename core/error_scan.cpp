@@ -134,8 +134,8 @@ TriangleStats scan_rows(const HeightGrid& grid,
             hrow_on = fn[k].min == 0;
         }
     }
-    // Rows above ymid use the [0] edges, rows from ymid on the [1] edges; a side with one edge
-    // uses it throughout.
+    // Rows above ymid use the [0] edges; from ymid on, the two-edge side (pair) switches to its
+    // [1] edge. A side with one edge uses it throughout.
     std::int64_t ymid = ymax;
     int* pair = nl == 2 ? left : (nr == 2 ? right : nullptr);
     if (pair != nullptr) {
@@ -144,12 +144,6 @@ TriangleStats scan_rows(const HeightGrid& grid,
             std::swap(pair[0], pair[1]);
         }
         ymid = std::max(from[pair[0]].y, to[pair[0]].y);
-    }
-    if (nl == 1) {
-        left[1] = left[0];
-    }
-    if (nr == 1) {
-        right[1] = right[0];
     }
     // Per visited sample along a row and per visited row: the weights' steps.
     const double sa = static_cast<double>(fn[0].a * step), sb = static_cast<double>(fn[1].a * step),

@@ -43,7 +43,8 @@ void init_gdal() {
 DemInfo inspect_dem(const std::string& path, double exact_range_samples) {
     init_gdal();
     namespace fs = std::filesystem;
-    const bool virtual_path = path.rfind("/vsi", 0) == 0 || path.find('<') != std::string::npos;
+    const bool vrt_xml = path.find('<') != std::string::npos; // a mosaic's VRT description
+    const bool virtual_path = path.rfind("/vsi", 0) == 0 || vrt_xml;
     if (!virtual_path) {
         std::error_code ec;
         const auto status = fs::status(path, ec);
@@ -166,8 +167,7 @@ DemInfo inspect_dem(const std::string& path, double exact_range_samples) {
     const bool approx = samples > exact_range_samples;
     info.range_exact = !approx;
     if (!approx && samples > 64e6) {
-        const bool mosaic = path.find('<') != std::string::npos; // a VRT description
-        log::info((mosaic ? std::string("the mosaic") : path) + ": reading all " +
+        log::info((vrt_xml ? std::string("the mosaic") : path) + ": reading all " +
                   std::to_string(std::llround(samples / 1e6)) +
                   " Mpixel once for the exact height range");
     }

@@ -212,12 +212,15 @@ private:
             // GDAL's approximate pass can miss the extremes, and a bounding volume that does
             // not hold the surface makes clients cull tiles they should draw. Take in the
             // Earth's whole relief instead (Challenger Deep to Everest, orthometric).
+            constexpr double kDeepest = -11100, kHighest = 8900;
             log::warn(info.path + ": height range " + std::to_string(std::llround(lo)) + " .. " +
                       std::to_string(std::llround(hi)) +
                       " m is approximate (too large to read whole); tileset bounding volumes "
-                      "span -11100 .. 8900 m instead");
-            lo = std::min(lo, -11100.0);
-            hi = std::max(hi, 8900.0);
+                      "span " +
+                      std::to_string(std::llround(kDeepest)) + " .. " +
+                      std::to_string(std::llround(kHighest)) + " m instead");
+            lo = std::min(lo, kDeepest);
+            hi = std::max(hi, kHighest);
         }
         // Voids (nodata, or bounding-box corners of a projected DEM) may lie at 0 m orthometric.
         if (info.nodata || !info.geographic) {
