@@ -8,7 +8,7 @@
 // relief from 115 to 1908 m, no voids), or the DEM given as argv[1]; zoom argv[2] (default:
 // the layer's max zoom, the most tiles and the finest eps); runs argv[3] (default 3, median).
 #include "core/triangulate.hpp"
-#include "tiler/encode.hpp"
+#include "tiler/formats/encode.hpp"
 #include "tiler/layer.hpp"
 #include "tiler/log.hpp"
 

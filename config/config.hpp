@@ -5,7 +5,7 @@
 // Every problem in a file is collected and reported together, one line each, with the JSON
 // pointer of the offending value:
 //   config.json: /layers/0/finest_eps: expected a number > 0, got -1
-#include "tiler/format.hpp"
+#include "tiler/formats/format.hpp"
 #include "tiler/layer.hpp"
 
 #include <cstddef>

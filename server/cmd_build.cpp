@@ -1,8 +1,8 @@
 // terrabound build: pre-generate a layer's tile pyramid into a directory or an SQLite file.
-// The work is tiler/build.cpp; this file parses options, handles SIGINT/SIGTERM and reports.
+// The work is tiler/build/build.cpp; this file parses options, handles SIGINT/SIGTERM and reports.
 #include "core/error.hpp"
 #include "server/commands.hpp"
-#include "tiler/build.hpp"
+#include "tiler/build/build.hpp"
 #include "tiler/log.hpp"
 
 #include <atomic>

@@ -1,7 +1,7 @@
 // terrabound info: what a DEM is.
 #include "core/error.hpp"
 #include "server/commands.hpp"
-#include "tiler/gdal_source.hpp"
+#include "tiler/sources/gdal_source.hpp"
 #include "tiler/layer.hpp"
 
 #include <cmath>

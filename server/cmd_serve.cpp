@@ -6,7 +6,7 @@
 #include "server/metrics.hpp"
 #include "server/tile_service.hpp"
 #include "tiler/log.hpp"
-#include "tiler/store.hpp"
+#include "tiler/stores/store.hpp"
 
 #include <pthread.h>
 #include <signal.h>

@@ -3,7 +3,7 @@
 #include "core/error.hpp"
 #include "core/triangulate.hpp"
 #include "server/commands.hpp"
-#include "tiler/gdal_source.hpp"
+#include "tiler/sources/gdal_source.hpp"
 #include "tiler/layer.hpp"
 #include "tiler/log.hpp"
 

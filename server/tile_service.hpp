@@ -7,9 +7,9 @@
 // TileStore::put) and inserted in the LRU. Tiles with no data are remembered in the LRU too, so
 // repeated requests outside the data stay cheap.
 #include "server/metrics.hpp"
-#include "tiler/format.hpp"
+#include "tiler/formats/format.hpp"
 #include "tiler/layer.hpp"
-#include "tiler/store.hpp"
+#include "tiler/stores/store.hpp"
 
 #include <cstddef>
 #include <memory>

@@ -4,9 +4,9 @@
 
 #include "core/error.hpp"
 #include "core/triangulate.hpp"
-#include "tiler/encode.hpp"
-#include "tiler/gdal_source.hpp"
-#include "tiler/geoid.hpp"
+#include "tiler/formats/encode.hpp"
+#include "tiler/sources/gdal_source.hpp"
+#include "tiler/sources/geoid.hpp"
 #include "tiler/log.hpp"
 
 #include <unistd.h>

@@ -2,10 +2,10 @@
 // A layer: one or more DEMs published as one tile pyramid. This is what the `tile`, `build`
 // and `serve` commands share: DEM -> tile raster -> mesh -> encoded bytes.
 #include "core/mesh.hpp"
-#include "tiler/encode.hpp"
-#include "tiler/format.hpp"
+#include "tiler/formats/encode.hpp"
+#include "tiler/formats/format.hpp"
 #include "tiler/tile_grid.hpp"
-#include "tiler/tile_raster.hpp"
+#include "tiler/sources/tile_raster.hpp"
 
 #include <memory>
 #include <optional>

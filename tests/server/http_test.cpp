@@ -4,7 +4,7 @@
 #include "server_fixture.hpp"
 #include "tiler/layer.hpp"
 #include "tiler/log.hpp"
-#include "tiler/store.hpp"
+#include "tiler/stores/store.hpp"
 
 #include <doctest/doctest.h>
 #include <nlohmann/json.hpp>

@@ -1,7 +1,7 @@
 // `terrabound serve` as a child process: startup line, and SIGTERM while tiles are being
 // generated finishes every request in flight, closes the store and exits 0.
 #include "server_fixture.hpp"
-#include "tiler/store.hpp"
+#include "tiler/stores/store.hpp"
 
 #include <doctest/doctest.h>
 #include <nlohmann/json.hpp>

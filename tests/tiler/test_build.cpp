@@ -1,9 +1,9 @@
 // terrabound build, end to end: the real binary (TB_BINARY) on a generated GeoTIFF and on a
 // real DEM, into both stores; kill and resume, shards, thread counts, bad input.
 #include "core/error.hpp"
-#include "tiler/build.hpp"
-#include "tiler/draco_decode.hpp"
-#include "tiler/store.hpp"
+#include "tiler/build/build.hpp"
+#include "tiler/formats/draco_decode.hpp"
+#include "tiler/stores/store.hpp"
 
 #include <doctest/doctest.h>
 #include <gdal_priv.h>

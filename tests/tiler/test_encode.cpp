@@ -4,8 +4,8 @@
 
 #include "core/error.hpp"
 #include "core/triangulate.hpp"
-#include "tiler/draco_decode.hpp"
-#include "tiler/encode.hpp"
+#include "tiler/formats/draco_decode.hpp"
+#include "tiler/formats/encode.hpp"
 #include "tiler/geodesy.hpp"
 #include "tiler/layer.hpp"
 

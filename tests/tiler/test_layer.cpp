@@ -2,9 +2,9 @@
 #include "core/error.hpp"
 #include "core/triangulate.hpp"
 #include "tests/tiler/test_raster_util.hpp"
-#include "tiler/draco_decode.hpp"
-#include "tiler/gdal_source.hpp"
-#include "tiler/geoid.hpp"
+#include "tiler/formats/draco_decode.hpp"
+#include "tiler/sources/gdal_source.hpp"
+#include "tiler/sources/geoid.hpp"
 #include "tiler/layer.hpp"
 
 #include <doctest/doctest.h>

@@ -4,8 +4,8 @@
 #include "core/error.hpp"
 #include "core/triangulate.hpp"
 #include "tests/tiler/test_raster_util.hpp"
-#include "tiler/gdal_source.hpp"
-#include "tiler/geoid.hpp"
+#include "tiler/sources/gdal_source.hpp"
+#include "tiler/sources/geoid.hpp"
 #include "tiler/layer.hpp"
 
 #include <doctest/doctest.h>

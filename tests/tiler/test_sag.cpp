@@ -4,11 +4,11 @@
 // so chord sag and the lon/lat -> ECEF distortion are both in the measurement.
 #include "core/triangulate.hpp"
 #include "tests/tiler/test_raster_util.hpp"
-#include "tiler/draco_decode.hpp"
-#include "tiler/encode.hpp"
+#include "tiler/formats/draco_decode.hpp"
+#include "tiler/formats/encode.hpp"
 #include "tiler/geodesy.hpp"
 #include "tiler/layer.hpp"
-#include "tiler/tile_raster.hpp"
+#include "tiler/sources/tile_raster.hpp"
 
 #include <doctest/doctest.h>
 

@@ -1,6 +1,6 @@
 // Tile stores: byte-exact round trips, names that must not escape, atomic writes.
 #include "core/error.hpp"
-#include "tiler/store.hpp"
+#include "tiler/stores/store.hpp"
 
 #include <doctest/doctest.h>
 

@@ -1,8 +1,8 @@
 // The layer's 3D Tiles 1.1 tileset: every document reachable from tileset.json, every content
 // a tile the layer makes, errors decreasing, regions nested and holding the decoded content.
 #include "core/triangulate.hpp"
-#include "tiler/draco_decode.hpp"
-#include "tiler/encode.hpp"
+#include "tiler/formats/draco_decode.hpp"
+#include "tiler/formats/encode.hpp"
 #include "tiler/geodesy.hpp"
 
 #include <doctest/doctest.h>

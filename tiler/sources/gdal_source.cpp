@@ -1,4 +1,4 @@
-#include "tiler/gdal_source.hpp"
+#include "tiler/sources/gdal_source.hpp"
 
 #include "core/error.hpp"
 #include "tiler/log.hpp"

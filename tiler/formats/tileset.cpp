@@ -14,7 +14,7 @@
 // a share of eps for sag and the mesher bounds edge lengths to keep sag within it). The region
 // is padded by the quantization move and that sag. The virtual root (no content) holds the min_zoom
 // tiles; its error is twice its largest child's, the tileset's twice the root's.
-#include "tiler/encode.hpp"
+#include "tiler/formats/encode.hpp"
 #include "tiler/geodesy.hpp"
 
 #include "core/error.hpp"

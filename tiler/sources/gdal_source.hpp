@@ -2,7 +2,7 @@
 // What a DEM is, as GDAL reads it (band 1). GDAL types stay inside tiler/gdal_*.cpp.
 #include "core/mesh.hpp"
 #include "tiler/tile_grid.hpp"
-#include "tiler/tile_raster.hpp"
+#include "tiler/sources/tile_raster.hpp"
 
 #include <array>
 #include <cstdint>

@@ -1,4 +1,4 @@
-#include "tiler/format.hpp"
+#include "tiler/formats/format.hpp"
 
 namespace tb::tiler {
 

@@ -1,9 +1,9 @@
 // EGM96 undulation from PROJ's egm96_15.gtx (721 x 1440 Float32, 0.25 degree cells whose
 // centres lie on multiples of 0.25 degree), read once with GDAL and interpolated bilinearly.
-#include "tiler/geoid.hpp"
+#include "tiler/sources/geoid.hpp"
 
 #include "core/error.hpp"
-#include "tiler/gdal_source.hpp"
+#include "tiler/sources/gdal_source.hpp"
 
 #include <algorithm>
 #include <cmath>

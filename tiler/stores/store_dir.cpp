@@ -6,7 +6,7 @@
 // (".{file}.tmp-{pid}-{n}"), is fsynced and renamed over the target: rename(2) within one
 // directory is atomic, so a reader sees the old file or the new one, never a part.
 #include "core/error.hpp"
-#include "tiler/store.hpp"
+#include "tiler/stores/store.hpp"
 
 #include <atomic>
 #include <cerrno>

@@ -2,8 +2,8 @@
 // Encoding a meshed tile: glTF 2.0 + KHR_draco_mesh_compression (.glb) and raw Draco (.drc),
 // and the layer's 3D Tiles 1.1 tileset. Draco is included only in tiler/draco_*.cpp.
 #include "core/mesh.hpp"
-#include "tiler/format.hpp"
-#include "tiler/tile_raster.hpp"
+#include "tiler/formats/format.hpp"
+#include "tiler/sources/tile_raster.hpp"
 
 #include <functional>
 #include <string>

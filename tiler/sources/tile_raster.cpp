@@ -1,8 +1,8 @@
 // Tile raster geometry (the global sample lattice of a zoom) and void filling.
-#include "tiler/tile_raster.hpp"
+#include "tiler/sources/tile_raster.hpp"
 
 #include "core/error.hpp"
-#include "tiler/gdal_source.hpp"
+#include "tiler/sources/gdal_source.hpp"
 
 #include <algorithm>
 #include <cmath>

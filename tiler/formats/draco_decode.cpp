@@ -1,6 +1,6 @@
 // Decoding encode_tile's output with Draco's own decoder (what clients run), for tests and
 // self-checks. Draco's Status becomes InputError here: the bytes are what is wrong.
-#include "tiler/draco_decode.hpp"
+#include "tiler/formats/draco_decode.hpp"
 
 #include "core/error.hpp"
 

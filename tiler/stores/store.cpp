@@ -1,5 +1,5 @@
 // TileStore: choosing a store by path, and the name checks both stores share.
-#include "tiler/store.hpp"
+#include "tiler/stores/store.hpp"
 
 #include "core/error.hpp"
 

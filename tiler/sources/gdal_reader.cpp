@@ -1,7 +1,7 @@
 // Reading DEMs for tiles: band 1 of one file or of an in-memory VRT mosaic, sampled bilinearly
 // at the global lattice of a zoom, one GDAL handle per concurrent reader.
 #include "core/error.hpp"
-#include "tiler/gdal_source.hpp"
+#include "tiler/sources/gdal_source.hpp"
 #include "tiler/layer.hpp"
 #include "tiler/log.hpp"
 

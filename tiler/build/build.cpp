@@ -2,11 +2,11 @@
 // kill). Threads: N workers take tile indices from one atomic counter over the fixed order,
 // make the tile's formats and push the bytes into a bounded queue; the calling thread is the
 // only writer: it drains the queue into the store in batches and draws the progress.
-#include "tiler/build.hpp"
+#include "tiler/build/build.hpp"
 
 #include "core/error.hpp"
 #include "tiler/log.hpp"
-#include "tiler/store.hpp"
+#include "tiler/stores/store.hpp"
 
 #include <algorithm>
 #include <charconv>

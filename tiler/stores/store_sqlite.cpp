@@ -7,7 +7,7 @@
 // leaves every row whole or absent. One connection serves all threads, behind a mutex, with
 // its statements prepared once.
 #include "core/error.hpp"
-#include "tiler/store.hpp"
+#include "tiler/stores/store.hpp"
 
 #include <filesystem>
 #include <memory>

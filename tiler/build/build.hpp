@@ -10,7 +10,7 @@
 //      tiles are in, and `--finalize` writes the tileset once every shard has reported.
 // Tiles are enumerated in a fixed order (zoom ascending, then row-major y, x) and each tile's
 // bytes depend on the tile alone, so the output is the same whatever the thread count.
-#include "tiler/format.hpp"
+#include "tiler/formats/format.hpp"
 #include "tiler/layer.hpp"
 #include "tiler/tile_grid.hpp"
 

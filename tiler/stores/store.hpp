@@ -9,7 +9,7 @@
 // writes a temporary file next to the target, fsyncs it and renames it over the target; the
 // SQLite store commits each put (or each put_batch) as one transaction.
 // Both stores are safe to use from many threads at once.
-#include "tiler/format.hpp"
+#include "tiler/formats/format.hpp"
 #include "tiler/tile_grid.hpp"
 
 #include <memory>

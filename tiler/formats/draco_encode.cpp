@@ -9,8 +9,8 @@
 // (node translation) is itself a lattice point, so translation + decoded position is the
 // snapped ECEF point, identical in every tile that holds the vertex. Before writing, the tile
 // is decoded and checked against every valid sample (snapped_error, then a Draco round trip).
-#include "tiler/draco_decode.hpp"
-#include "tiler/encode.hpp"
+#include "tiler/formats/draco_decode.hpp"
+#include "tiler/formats/encode.hpp"
 #include "tiler/geodesy.hpp"
 #include "tiler/log.hpp"
 
