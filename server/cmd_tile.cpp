@@ -3,9 +3,9 @@
 #include "core/error.hpp"
 #include "core/triangulate.hpp"
 #include "server/commands.hpp"
-#include "tiler/sources/gdal_source.hpp"
 #include "tiler/layer.hpp"
 #include "tiler/log.hpp"
+#include "tiler/sources/gdal_source.hpp"
 
 #include <algorithm>
 #include <cstdio>
@@ -55,19 +55,38 @@ int run(const Args& args) {
     summary << "tile " << id.z << "/" << id.x << "/" << id.y << " (" << to_string(options.scheme)
             << "): ";
     if (ext == "tif") {
-        const tiler::TileRaster raster = layer->make_raster(id);
+        const tiler::TileRaster raster = layer->mesh_tile_at(id, eps).raster;
         tiler::write_tile_raster_tiff(raster, *out);
         const auto voids = std::count(raster.grid.valid.begin(), raster.grid.valid.end(), 0);
         summary << raster.grid.width << " x " << raster.grid.height << " samples, " << voids
                 << " void";
     } else if (ext == "obj") {
-        const tiler::TileRaster raster = layer->make_raster(id);
-        const tiler::ErrorBudget budget =
-            tiler::tile_error_budget(eps, raster.scheme, raster.id.z, raster.size);
-        const core::Mesh mesh = tiler::mesh_tile(raster, budget);
-        tiler::write_file_atomically(*out, tiler::mesh_to_obj(mesh));
-        summary << mesh.points.size() << " vertices, " << mesh.triangle_count()
-                << " triangles, eps " << eps << " m (mesh " << budget.mesh_eps << " m)";
+        const tiler::MeshedTile t = layer->mesh_tile_at(id, eps);
+        std::string text;
+        char line[128];
+        for (std::size_t v = 0; v < t.mesh.vertex_count(); ++v) {
+            double column = 0, row = 0;
+            tiler::vertex_grid_position(t.raster, t.mesh, v, column, row);
+            std::snprintf(line,
+                          sizeof line,
+                          "v %.17g %.17g %.9g\n",
+                          column,
+                          row,
+                          static_cast<double>(t.mesh.z[v]));
+            text += line;
+        }
+        for (std::size_t e = 0; e + 2 < t.mesh.triangles.size(); e += 3) {
+            std::snprintf(line,
+                          sizeof line,
+                          "f %u %u %u\n",
+                          t.mesh.triangles[e] + 1,
+                          t.mesh.triangles[e + 1] + 1,
+                          t.mesh.triangles[e + 2] + 1);
+            text += line;
+        }
+        tiler::write_file_atomically(*out, text);
+        summary << t.mesh.vertex_count() << " vertices, " << t.mesh.triangle_count()
+                << " triangles, eps " << eps << " m (mesh " << t.budget.mesh_eps << " m)";
     } else {
         const auto format = *tiler::parse_format(ext);
         const std::string bytes = layer->make_tile_at(id, format, eps);
@@ -93,9 +112,11 @@ const Command& tile_command() {
              {"size", "N", "tile raster of (N+1) x (N+1) samples (default 256)"},
              {"datum", "NAME", "source heights: auto (default), egm96 or ellipsoid"},
          },
-         "Outputs: .glb (glTF + Draco, ECEF), .drc (Draco, local ENU), .obj (the mesh in tile\n"
-         "grid coordinates: v column row height, heights above the WGS84 ellipsoid) and .tif\n"
-         "(the tile raster exactly as meshed, Float32, voids in the mask band). Several INPUTs\n"
+         "Outputs: .glb (glTF + Draco, ECEF), .drc (Draco, local ENU), .obj (the mesh in the\n"
+         "grid coordinates of the samples it was meshed on: v column row height, heights above\n"
+         "the WGS84 ellipsoid; border vertices sit between samples) and .tif (those samples\n"
+         "exactly as meshed: the source's own pixels, or the zoom's lattice; Float32, voids in\n"
+         "the mask band). Several INPUTs\n"
          "are mosaicked. Z X Y outside the scheme is an error (exit 2); a tile without data\n"
          "is reported as not found (exit 2)."},
         run};

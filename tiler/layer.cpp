@@ -5,9 +5,10 @@
 #include "core/error.hpp"
 #include "core/triangulate.hpp"
 #include "tiler/formats/encode.hpp"
+#include "tiler/log.hpp"
+#include "tiler/mesh/pixel_tile.hpp"
 #include "tiler/sources/gdal_source.hpp"
 #include "tiler/sources/geoid.hpp"
-#include "tiler/log.hpp"
 
 #include <unistd.h>
 
@@ -18,6 +19,9 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
+#include <map>
+#include <mutex>
 #include <sstream>
 
 namespace tb::tiler {
@@ -55,6 +59,7 @@ public:
                                          "to tile");
         }
         footprint_ = source_->footprint();
+        pixels_ = source_->pixel_grid(options_.scheme);
         datum_ = options_.datum;
         if (datum_ == VerticalDatum::Auto) {
             datum_ =
@@ -104,6 +109,8 @@ public:
         spec.eps_for_zoom = [this](int z) { return eps_for_zoom(z); };
         spec.tile_size = options_.tile_size;
         spec.has_tile = [this](const TileId& id) { return may_have_tile(id); };
+        spec.budget_for_zoom = [this](int z) { return budget_at(z, eps_for_zoom(z)); };
+        spec.error_for_tile = [this](const TileId& id) { return tile_error(id); };
         return tileset_document(spec, path, out);
     }
 
@@ -125,12 +132,67 @@ public:
     TileRaster make_raster(const TileId& id) const override;
 
     std::string make_tile_at(const TileId& id, Format format, double eps) const override {
+        const MeshedTile t = mesh_tile_at(id, eps);
+        EncodeReport report;
+        std::string bytes =
+            encode_tile(t.raster, t.mesh, format, t.budget, t.source_pixels, &report);
+        if (guarantee() == Guarantee::Measured) {
+            note_measured(id, eps, report);
+        }
+        return bytes;
+    }
+
+    MeshedTile mesh_tile_at(const TileId& id, double eps) const override {
         check_eps(eps, "eps");
-        const TileRaster raster = make_raster(id);
-        // The sag share of eps becomes a longest edge constant over the zoom, so neighbouring
-        // tiles keep identical border vertices.
-        const ErrorBudget budget = tile_error_budget(eps, raster.scheme, raster.id.z, raster.size);
-        return encode_tile(raster, mesh_tile(raster, budget), format, budget);
+        check_id(id);
+        MeshedTile t;
+        t.budget = budget_at(id.z, eps);
+        if (pixels_) {
+            PixelTile pixel = make_pixel_tile(*source_, *pixels_, options_.scheme, id, datum_);
+            t.mesh = mesh_pixel_tile(pixel, t.budget);
+            t.raster = std::move(pixel.raster);
+            return t;
+        }
+        t.raster = make_raster(id);
+        t.mesh = to_tile_mesh(t.raster, mesh_tile(t.raster, t.budget), true);
+        // Every valid source pixel under the tile, as the drawn tile must hold it.
+        for (const SourcePixel& p : source_->pixels_in(t.raster.bounds)) {
+            CheckPoint c;
+            lonlat_to_grid(t.raster, {p.lon, p.lat}, c.column, c.row);
+            c.height =
+                p.height + (datum_ == VerticalDatum::Egm96 ? egm96_undulation(p.lon, p.lat) : 0.0);
+            t.source_pixels.push_back(c);
+        }
+        return t;
+    }
+
+    Guarantee guarantee() const override {
+        return pixels_ ? Guarantee::SourcePixels : Guarantee::Measured;
+    }
+
+    double tile_error(const TileId& id) const override {
+        const double eps = eps_for_zoom(id.z);
+        if (pixels_) {
+            return budget_at(id.z, eps).drawn_bound;
+        }
+        {
+            std::lock_guard lock(measured_mutex_);
+            if (const auto it = measured_.find(id); it != measured_.end()) {
+                return it->second;
+            }
+        }
+        try {
+            make_tile_at(id, Format::Glb, eps); // measures and records it
+        } catch (const NotFound&) {
+            return budget_at(id.z, eps).drawn_bound;
+        }
+        std::lock_guard lock(measured_mutex_);
+        return measured_.at(id);
+    }
+
+    std::size_t tiles_over_eps() const override {
+        std::lock_guard lock(measured_mutex_);
+        return over_eps_;
     }
 
     double min_height() const override { return min_height_; }
@@ -188,8 +250,37 @@ private:
                 min_z = z;
             }
         }
+        // Every zoom reads the full-resolution pixels under a tile (meshed on them, or checked
+        // against them), so a zoom whose tiles would hold more than kMaxPixelsPerTile is not
+        // offered.
+        int coarsest = 0;
+        while (coarsest <= max_z && tile_pixels(coarsest) > kMaxPixelsPerTile) {
+            ++coarsest;
+        }
+        if (coarsest > max_z) {
+            throw InputError(
+                "layer '" + options_.name + "': a tile at max zoom " + std::to_string(max_z) +
+                " would hold " + std::to_string(std::llround(tile_pixels(max_z))) +
+                " source pixels, more than one tile reads (" +
+                std::to_string(std::llround(kMaxPixelsPerTile)) + "); set a finer max_zoom");
+        }
         if (options_.min_zoom) {
             min_z = *options_.min_zoom;
+            if (min_z < coarsest) {
+                throw InputError("layer '" + options_.name + "': min zoom " +
+                                 std::to_string(min_z) + ": its tiles would hold up to " +
+                                 std::to_string(std::llround(tile_pixels(min_z))) +
+                                 " source pixels, more than one tile reads at full resolution (" +
+                                 std::to_string(std::llround(kMaxPixelsPerTile)) +
+                                 "; every zoom is held to the full-resolution DEM); use min zoom " +
+                                 std::to_string(coarsest) + " or finer");
+            }
+        } else if (min_z < coarsest) {
+            log::info("layer '" + options_.name + "': starts at zoom " + std::to_string(coarsest) +
+                      " instead of " + std::to_string(min_z) +
+                      ": coarser tiles would hold more source pixels than one tile reads (" +
+                      std::to_string(std::llround(kMaxPixelsPerTile)) + ")");
+            min_z = coarsest;
         }
         if (min_z > max_z) {
             throw InputError("layer '" + options_.name + "': min zoom " + std::to_string(min_z) +
@@ -201,6 +292,16 @@ private:
         }
         min_zoom_ = min_z;
         max_zoom_ = max_z;
+    }
+
+    // Source pixels one tile of zoom z reads at most: its extent in pixels, clipped to the
+    // source's size.
+    double tile_pixels(int z) const {
+        const DemInfo& info = source_->info();
+        const double side = source_->pixels_per_sample(options_.scheme, z, options_.tile_size) *
+                                options_.tile_size +
+                            2;
+        return std::min<double>(side, info.width) * std::min<double>(side, info.height);
     }
 
     // Ellipsoidal range of every sample a tile can hold: the data's range, sea level where
@@ -262,8 +363,39 @@ private:
         }
     }
 
+    // The error budget of zoom z's tiles at eps: in source pixels for pixel tiles, in lattice
+    // samples otherwise (the longest edge must be the same for every tile of a zoom).
+    ErrorBudget budget_at(int z, double eps) const {
+        return pixels_ ? pixel_error_budget(eps, options_.scheme, *pixels_)
+                       : tile_error_budget(eps, options_.scheme, z, options_.tile_size);
+    }
+
+    // Records a measured tile's published error (tiles at the ladder's eps only: that is the
+    // number its tileset carries), counting and logging those above eps.
+    void note_measured(const TileId& id, double eps, const EncodeReport& report) const {
+        if (eps != eps_for_zoom(id.z)) {
+            return;
+        }
+        std::lock_guard lock(measured_mutex_);
+        const auto [it, fresh] = measured_.emplace(id, report.published);
+        if (fresh && report.published > eps) {
+            ++over_eps_;
+            log::info("tile " + tile_name(id) + ": measured against the source's pixels, its " +
+                      "error is " + std::to_string(report.published) + " m, above the zoom's eps " +
+                      std::to_string(eps) + " m; the tileset publishes the measured bound");
+        }
+        if (fresh && report.points_outside > 0) {
+            log::debug("tile " + tile_name(id) + ": " + std::to_string(report.points_outside) +
+                       " valid source pixel(s) lie where the tile draws nothing (next to voids)");
+        }
+    }
+
     LayerOptions options_;
     std::shared_ptr<const DemSource> source_;
+    std::optional<PixelGrid> pixels_;
+    mutable std::mutex measured_mutex_;
+    mutable std::map<TileId, double> measured_;
+    mutable std::size_t over_eps_ = 0;
     LonLatBox footprint_;
     VerticalDatum datum_ = VerticalDatum::Egm96;
     int min_zoom_ = 0, max_zoom_ = 0;
@@ -425,6 +557,16 @@ void move_into_place(const std::string& temp, const std::string& path) {
         throw IoError(path + ": cannot rename the temporary file into place (" + ec.message() +
                       ")");
     }
+}
+
+const char* to_string(Guarantee guarantee) {
+    switch (guarantee) {
+    case Guarantee::SourcePixels:
+        return "source-pixels";
+    case Guarantee::Measured:
+        return "measured";
+    }
+    return "?";
 }
 
 VerticalDatum parse_datum(const std::string& name) {

@@ -4,8 +4,9 @@
 #include "core/mesh.hpp"
 #include "tiler/formats/encode.hpp"
 #include "tiler/formats/format.hpp"
-#include "tiler/tile_grid.hpp"
+#include "tiler/mesh/tile_mesh.hpp"
 #include "tiler/sources/tile_raster.hpp"
+#include "tiler/tile_grid.hpp"
 
 #include <memory>
 #include <optional>
@@ -34,6 +35,28 @@ struct LayerOptions {
     std::optional<double> finest_eps;      // metres at max_zoom; eps doubles per level up
     std::vector<double> eps_levels;        // extra eps (metres) selectable per request
     VerticalDatum datum = VerticalDatum::Auto;
+};
+
+// How a layer makes its published error true at every valid pixel of the source.
+enum class Guarantee {
+    // The source's pixels lie on the scheme's grid: tiles are meshed on the source's own pixel
+    // centres at full resolution (tiler/mesh/pixel_tile.hpp), so the bound holds by construction.
+    SourcePixels,
+    // Any other CRS: tiles are meshed on the zoom's lattice, and every valid source pixel centre
+    // under a tile, reprojected, is checked against the drawn tile; the tile publishes the larger
+    // of its eps and what was measured.
+    Measured,
+};
+const char* to_string(Guarantee guarantee);
+
+// A tile as meshed, before encoding.
+struct MeshedTile {
+    TileRaster raster; // the samples the mesher bounds: the source's pixels, or the lattice
+    TileMesh mesh;
+    ErrorBudget budget;
+    // Measured layers: every valid source pixel centre in the tile, in raster's grid
+    // coordinates, ellipsoidal heights (encode_tile checks the drawn tile against them).
+    std::vector<CheckPoint> source_pixels;
 };
 
 // Where a tile request's eps comes from: the zoom's own ladder value, or one of the layer's
@@ -75,6 +98,16 @@ public:
     // The encoded tile at an explicit published eps (metres, >= 0.001): raster, then
     // core::triangulate at error_budget(eps).mesh_eps with locked borders, then encode_tile.
     virtual std::string make_tile_at(const TileId& id, Format format, double eps) const = 0;
+    // The mesh make_tile_at encodes, with its samples and budget. Same errors as make_tile.
+    virtual MeshedTile mesh_tile_at(const TileId& id, double eps) const = 0;
+
+    virtual Guarantee guarantee() const = 0;
+    // The error a tile publishes at its zoom's eps (its tileset geometricError and .drc eps_m):
+    // the budget's drawn bound, or for Measured layers the larger measured bound of that tile
+    // (meshed here once if it was not made yet). Throws like make_tile.
+    virtual double tile_error(const TileId& id) const = 0;
+    // Tiles made so far whose measured error exceeded their zoom's eps (Measured layers).
+    virtual std::size_t tiles_over_eps() const = 0;
 
     // Ellipsoidal height range every tile's mesh stays within (padded by 1 m), metres.
     virtual double min_height() const = 0;

@@ -143,25 +143,35 @@ TEST_CASE("tile writes the tile raster as a georeferenced GeoTIFF and the mesh a
     GDALAllRegister();
     GDALDatasetUniquePtr ds(GDALDataset::Open(tif.c_str(), GDAL_OF_RASTER));
     REQUIRE(ds != nullptr);
-    CHECK(ds->GetRasterXSize() == 257);
-    CHECK(ds->GetRasterYSize() == 257);
+    // The tile is meshed on the DEM's own pixels: its raster is the block of 3" pixels whose
+    // centres lie in the tile (a z10 tile is 0.17578 degrees, 210 or 211 pixels across).
+    const int w = ds->GetRasterXSize(), h = ds->GetRasterYSize();
+    CHECK(w >= 210);
+    CHECK(w <= 211);
+    CHECK(h >= 210);
+    CHECK(h <= 211);
     double gt[6];
     REQUIRE(ds->GetGeoTransform(gt) == CE_None);
-    const double step = 180.0 / 1024 / 256;
-    CHECK(gt[0] + step / 2 == doctest::Approx(-180 + 617 * 180.0 / 1024));
-    CHECK(gt[1] == doctest::Approx(step));
-    std::vector<float> heights(257 * 257);
+    const double pixel = 1.0 / 1200;
+    CHECK(gt[1] == doctest::Approx(pixel));
+    const double west = -180 + 617 * 180.0 / 1024;
+    const double first_centre = gt[0] + pixel / 2;
+    CHECK(first_centre >= west);
+    CHECK(first_centre < west + pixel);
+    // ... on the DEM's grid (N44W072's pixel centres sit on whole multiples of 3" from -72).
+    const double k = (first_centre + 72) / pixel;
+    CHECK(std::abs(k - std::round(k)) < 1e-6);
+    std::vector<float> heights(static_cast<std::size_t>(w) * h);
     REQUIRE(ds->GetRasterBand(1)->RasterIO(
-                GF_Read, 0, 0, 257, 257, heights.data(), 257, 257, GDT_Float32, 0, 0, nullptr) ==
-            CE_None);
+                GF_Read, 0, 0, w, h, heights.data(), w, h, GDT_Float32, 0, 0, nullptr) == CE_None);
     ds.reset();
 
     const std::string obj_path = dir.file("t.obj");
     r = run(dir, "tile " + *path + " 10 617 765 --eps 3 -o " + obj_path);
     REQUIRE_MESSAGE(r.code == 0, r.err);
     const Obj obj = read_obj(obj_path);
-    const double worst =
-        tb_test::brute_force_max_error(obj.vertices, obj.triangles, 257, 257, heights, {});
+    const double worst = tb_test::brute_force_max_error(
+        obj.vertices, obj.triangles, w, h, heights, {}, std::pow(180.0 / 1024 / pixel, 2));
     CHECK(worst <= 3.0 + 1e-9);
 
     r = run(dir, "tile " + *path + " 10 617 765 -o " + dir.file("t.glb"));

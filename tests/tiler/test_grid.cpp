@@ -1,8 +1,8 @@
 // Pyramid arithmetic: both schemes' extents, validity, covering ranges and the sample lattice.
 #include "core/error.hpp"
 #include "tiler/sources/gdal_source.hpp"
-#include "tiler/tile_grid.hpp"
 #include "tiler/sources/tile_raster.hpp"
+#include "tiler/tile_grid.hpp"
 
 #include <doctest/doctest.h>
 

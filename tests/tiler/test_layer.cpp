@@ -3,9 +3,9 @@
 #include "core/triangulate.hpp"
 #include "tests/tiler/test_raster_util.hpp"
 #include "tiler/formats/draco_decode.hpp"
+#include "tiler/layer.hpp"
 #include "tiler/sources/gdal_source.hpp"
 #include "tiler/sources/geoid.hpp"
-#include "tiler/layer.hpp"
 
 #include <doctest/doctest.h>
 

@@ -4,9 +4,9 @@
 #include "core/error.hpp"
 #include "core/triangulate.hpp"
 #include "tests/tiler/test_raster_util.hpp"
+#include "tiler/layer.hpp"
 #include "tiler/sources/gdal_source.hpp"
 #include "tiler/sources/geoid.hpp"
-#include "tiler/layer.hpp"
 
 #include <doctest/doctest.h>
 #include <gdal_utils.h>

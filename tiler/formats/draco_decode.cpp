@@ -102,10 +102,23 @@ DecodedTile decode_glb(std::string_view bytes) {
                          " differs from the " + std::to_string(bytes.size()) + " bytes given");
     }
     const std::uint32_t json_len = read_u32(bytes, 12);
-    if (read_u32(bytes, 16) != 0x4E4F534A || 20 + std::size_t{json_len} + 8 > bytes.size()) {
+    if (read_u32(bytes, 16) != 0x4E4F534A || 20 + std::size_t{json_len} > bytes.size()) {
         throw InputError("glb: first chunk is not a complete JSON chunk");
     }
     const std::string_view json = bytes.substr(20, json_len);
+    if (20 + std::size_t{json_len} == bytes.size()) {
+        // No BIN chunk: an empty tile (all voids) has a scene without nodes and no buffer.
+        if (json.find("\"meshes\"") != std::string_view::npos ||
+            json.find("\"buffers\"") != std::string_view::npos) {
+            throw InputError("glb: has meshes or buffers but no BIN chunk");
+        }
+        DecodedTile empty;
+        empty.json = std::string(json);
+        return empty;
+    }
+    if (20 + std::size_t{json_len} + 8 > bytes.size()) {
+        throw InputError("glb: first chunk is not a complete JSON chunk");
+    }
     const std::size_t bin_at = 20 + std::size_t{json_len};
     const std::uint32_t bin_len = read_u32(bytes, bin_at);
     if (read_u32(bytes, bin_at + 4) != 0x004E4942 || bin_at + 8 + bin_len != bytes.size()) {

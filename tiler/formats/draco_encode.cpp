@@ -128,7 +128,7 @@ struct Verdict {
 };
 
 Verdict
-snapped_error(const TileRaster& raster, const core::Mesh& mesh, const std::vector<Ecef>& world) {
+snapped_error(const TileRaster& raster, const TileMesh& mesh, const std::vector<Ecef>& world) {
     const core::HeightGrid& grid = raster.grid;
     std::vector<std::array<double, 3>> g(world.size());
     for (std::size_t v = 0; v < world.size(); ++v) {
@@ -186,6 +186,91 @@ snapped_error(const TileRaster& raster, const core::Mesh& mesh, const std::vecto
     return verdict;
 }
 
+// The check points against the snapped surface, located by bucketing them into grid cells and
+// walking each triangle's bounding cells.
+EncodeReport points_error(const TileRaster& raster,
+                          const TileMesh& mesh,
+                          const std::vector<Ecef>& world,
+                          const std::vector<CheckPoint>& points) {
+    EncodeReport report;
+    if (points.empty()) {
+        return report;
+    }
+    std::vector<std::array<double, 3>> g(world.size());
+    double c_lo = INFINITY, c_hi = -INFINITY, r_lo = INFINITY, r_hi = -INFINITY;
+    for (std::size_t v = 0; v < world.size(); ++v) {
+        const Geodetic p = to_geodetic(world[v]);
+        lonlat_to_grid(raster, {p.lon, p.lat}, g[v][0], g[v][1]);
+        g[v][2] = p.h;
+        c_lo = std::min(c_lo, g[v][0]), c_hi = std::max(c_hi, g[v][0]);
+        r_lo = std::min(r_lo, g[v][1]), r_hi = std::max(r_hi, g[v][1]);
+    }
+    const double c0 = std::floor(c_lo) - 1, r0 = std::floor(r_lo) - 1;
+    const int cells_x = static_cast<int>(std::ceil(c_hi) - c0) + 2;
+    const int cells_y = static_cast<int>(std::ceil(r_hi) - r0) + 2;
+    const auto cell_of = [&](double c, double r, int& i, int& j) {
+        i = std::clamp(static_cast<int>(std::floor(c - c0)), 0, cells_x - 1);
+        j = std::clamp(static_cast<int>(std::floor(r - r0)), 0, cells_y - 1);
+    };
+    std::vector<std::uint32_t> start(static_cast<std::size_t>(cells_x) * cells_y + 1, 0);
+    std::vector<int> cell(points.size());
+    for (std::size_t k = 0; k < points.size(); ++k) {
+        int i = 0, j = 0;
+        cell_of(points[k].column, points[k].row, i, j);
+        cell[k] = j * cells_x + i;
+        ++start[static_cast<std::size_t>(cell[k]) + 1];
+    }
+    for (std::size_t k = 1; k < start.size(); ++k) {
+        start[k] += start[k - 1];
+    }
+    std::vector<std::uint32_t> order(points.size());
+    {
+        std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
+        for (std::size_t k = 0; k < points.size(); ++k) {
+            order[fill[static_cast<std::size_t>(cell[k])]++] = static_cast<std::uint32_t>(k);
+        }
+    }
+    constexpr double kEdge = -1e-9;
+    std::vector<double> error(points.size(), -1);
+    for (std::size_t t = 0; t < mesh.triangle_count(); ++t) {
+        const auto& a = g[mesh.triangles[3 * t]];
+        const auto& b = g[mesh.triangles[3 * t + 1]];
+        const auto& c = g[mesh.triangles[3 * t + 2]];
+        const double det = (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1]);
+        if (det == 0) {
+            continue;
+        }
+        int i0 = 0, j0 = 0, i1 = 0, j1 = 0;
+        cell_of(std::min({a[0], b[0], c[0]}), std::min({a[1], b[1], c[1]}), i0, j0);
+        cell_of(std::max({a[0], b[0], c[0]}), std::max({a[1], b[1], c[1]}), i1, j1);
+        for (int j = j0; j <= j1; ++j) {
+            for (int i = i0; i <= i1; ++i) {
+                const std::size_t q = static_cast<std::size_t>(j) * cells_x + i;
+                for (std::uint32_t o = start[q]; o < start[q + 1]; ++o) {
+                    const CheckPoint& p = points[order[o]];
+                    const double x = p.column, y = p.row;
+                    const double la = ((b[0] - x) * (c[1] - y) - (c[0] - x) * (b[1] - y)) / det;
+                    const double lb = ((c[0] - x) * (a[1] - y) - (a[0] - x) * (c[1] - y)) / det;
+                    const double lc = 1 - la - lb;
+                    if (std::min({la, lb, lc}) < kEdge) {
+                        continue;
+                    }
+                    const double e = std::abs(la * a[2] + lb * b[2] + lc * c[2] - p.height);
+                    error[order[o]] = std::max(error[order[o]], e);
+                }
+            }
+        }
+    }
+    for (double e : error) {
+        if (e < 0) {
+            ++report.points_outside;
+        } else {
+            report.points_error = std::max(report.points_error, e);
+        }
+    }
+    return report;
+}
+
 std::string glb_json(const std::array<double, 3>& translation,
                      const std::array<double, 3>& min,
                      const std::array<double, 3>& max,
@@ -238,6 +323,28 @@ std::string glb_container(std::string json, std::string_view bin) {
     return out;
 }
 
+// A tile whose data are all voids: a glb with an empty scene (no buffer, no BIN chunk); a raw
+// Draco tile has no such form, so there is no .drc of it.
+std::string empty_tile(const TileRaster& raster, Format format, const ErrorBudget& budget) {
+    if (format == Format::Drc) {
+        throw NotFound("tile " + tile_name(raster.id) +
+                       ": holds only voids, so there is no mesh to send as .drc");
+    }
+    (void)budget;
+    std::string json =
+        R"({"asset":{"version":"2.0","generator":"Terrabound"},"scene":0,"scenes":[{"nodes":[]}]})";
+    while (json.size() % 4 != 0) {
+        json.push_back(' ');
+    }
+    std::string out;
+    put_u32(out, kGlbMagic);
+    put_u32(out, 2);
+    put_u32(out, static_cast<std::uint32_t>(12 + 8 + json.size()));
+    put_u32(out, static_cast<std::uint32_t>(json.size()));
+    put_u32(out, kChunkJson);
+    return out + json;
+}
+
 } // namespace
 
 ErrorBudget error_budget(double eps) {
@@ -279,13 +386,13 @@ double sample_spacing_m(Scheme scheme, int z, int size) {
     return kPi / 180 * (kA * kA / kB) * tile_deg / size;
 }
 
-ErrorBudget tile_error_budget(double eps, Scheme scheme, int z, int size) {
+ErrorBudget spacing_error_budget(double eps, double spacing_m, double min_edge) {
+    TB_ASSERT(spacing_m > 0 && min_edge >= core::kMinMaxEdge);
     ErrorBudget b = error_budget(eps);
-    const double spacing = sample_spacing_m(scheme, z, size);
-    b.max_edge = b.max_edge_m / spacing;
-    if (b.max_edge < core::kMinMaxEdge) {
-        b.max_edge = core::kMinMaxEdge;
-        b.max_edge_m = core::kMinMaxEdge * spacing;
+    b.max_edge = b.max_edge_m / spacing_m;
+    if (b.max_edge < min_edge) {
+        b.max_edge = min_edge;
+        b.max_edge_m = min_edge * spacing_m;
         b.sag = kSagMargin * b.max_edge_m * b.max_edge_m / (6 * kSagRadius);
         b.mesh_eps = eps - b.quant_error - b.sag;
         if (!(b.mesh_eps >= eps / 8)) {
@@ -296,13 +403,33 @@ ErrorBudget tile_error_budget(double eps, Scheme scheme, int z, int size) {
     return b;
 }
 
+ErrorBudget tile_error_budget(double eps, Scheme scheme, int z, int size) {
+    return spacing_error_budget(eps, sample_spacing_m(scheme, z, size), core::kMinMaxEdge);
+}
+
 std::string encode_tile(const TileRaster& raster,
                         const core::Mesh& mesh,
                         Format format,
                         const ErrorBudget& budget) {
-    const std::size_t n = mesh.points.size();
-    TB_ASSERT(n >= 3 && mesh.z.size() == n && mesh.triangles.size() % 3 == 0);
-    TB_ASSERT(!mesh.triangles.empty());
+    return encode_tile(raster, to_tile_mesh(raster, mesh, false), format, budget);
+}
+
+std::string encode_tile(const TileRaster& raster,
+                        const TileMesh& mesh,
+                        Format format,
+                        const ErrorBudget& budget,
+                        const std::vector<CheckPoint>& points,
+                        EncodeReport* report) {
+    const std::size_t n = mesh.vertex_count();
+    TB_ASSERT(mesh.z.size() == n && mesh.y.size() == n && mesh.border.size() == n);
+    TB_ASSERT(mesh.triangles.size() % 3 == 0);
+    if (mesh.triangles.empty()) {
+        if (report) {
+            *report = EncodeReport{0, points.size(), budget.drawn_bound};
+        }
+        return empty_tile(raster, format, budget);
+    }
+    TB_ASSERT(n >= 3);
     TB_ASSERT(budget.quant_step > 0 && budget.eps > 0);
     const double s = budget.quant_step;
 
@@ -310,7 +437,7 @@ std::string encode_tile(const TileRaster& raster,
     std::vector<Ecef> ecef(n);
     float z_min = mesh.z[0], z_max = mesh.z[0];
     for (std::size_t v = 0; v < n; ++v) {
-        const LonLat ll = grid_to_lonlat(raster, mesh.points[v].x, mesh.points[v].y);
+        const LonLat ll = native_to_lonlat(raster.scheme, mesh.x[v], mesh.y[v]);
         ecef[v] = to_ecef({ll.lon, ll.lat, double(mesh.z[v])});
         z_min = std::min(z_min, mesh.z[v]);
         z_max = std::max(z_max, mesh.z[v]);
@@ -343,10 +470,7 @@ std::string encode_tile(const TileRaster& raster,
     for (int refine = 0;; ++refine) {
         step = std::ldexp(s, -refine);
         for (std::size_t v = 0; v < n; ++v) {
-            const core::GridPoint p = mesh.points[v];
-            const bool border = p.x == 0 || p.y == 0 || p.x == raster.grid.width - 1 ||
-                                p.y == raster.grid.height - 1;
-            const double unit = border ? s : step;
+            const double unit = mesh.border[v] ? s : step;
             const double ratio = unit / step; // a power of two
             if (format == Format::Glb) {
                 const std::array<double, 3> k{std::round(ecef[v].x / unit) * ratio,
@@ -387,9 +511,20 @@ std::string encode_tile(const TileRaster& raster,
         }
     }
     const Snapped snap = finish_lattice(q, step, raster, budget);
+    EncodeReport measured = points_error(raster, mesh, world, points);
+    measured.published = budget.drawn_bound;
+    if (!points.empty()) {
+        // Rounded up, so the number printed is never below what was measured.
+        measured.published = std::max(measured.published,
+                                      std::nextafter(measured.points_error + budget.sag,
+                                                     std::numeric_limits<double>::infinity()));
+    }
+    if (report) {
+        *report = measured;
+    }
 
-    // The Draco mesh: lattice points as float32 (exact), triangles flipped to be
-    // counter-clockwise seen from above (core's are CCW in (column, row), row pointing south).
+    // The Draco mesh: lattice points as float32 (exact), triangles counter-clockwise seen from
+    // above as given.
     draco::Mesh dm;
     dm.set_num_points(static_cast<draco::PointIndex::ValueType>(n));
     draco::GeometryAttribute ga;
@@ -410,8 +545,8 @@ std::string encode_tile(const TileRaster& raster,
     }
     for (std::size_t t = 0; t < mesh.triangle_count(); ++t) {
         dm.AddFace({draco::PointIndex(mesh.triangles[3 * t]),
-                    draco::PointIndex(mesh.triangles[3 * t + 2]),
-                    draco::PointIndex(mesh.triangles[3 * t + 1])});
+                    draco::PointIndex(mesh.triangles[3 * t + 1]),
+                    draco::PointIndex(mesh.triangles[3 * t + 2])});
     }
     if (format == Format::Drc) {
         auto md = std::make_unique<draco::GeometryMetadata>();
@@ -429,7 +564,7 @@ std::string encode_tile(const TileRaster& raster,
         md->AddEntryDouble("north_deg", raster.bounds.north);
         md->AddEntryDouble("min_h_m", z_min);
         md->AddEntryDouble("max_h_m", z_max);
-        md->AddEntryDouble("eps_m", budget.eps);
+        md->AddEntryDouble("eps_m", measured.published);
         md->AddEntryDouble("quant_step_m", step);
         md->AddEntryDouble("quant_error_m", budget.quant_error);
         md->AddEntryInt("level", raster.id.z);

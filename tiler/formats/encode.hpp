@@ -3,6 +3,7 @@
 // and the layer's 3D Tiles 1.1 tileset. Draco is included only in tiler/draco_*.cpp.
 #include "core/mesh.hpp"
 #include "tiler/formats/format.hpp"
+#include "tiler/mesh/tile_mesh.hpp"
 #include "tiler/sources/tile_raster.hpp"
 
 #include <functional>
@@ -68,19 +69,49 @@ double sample_spacing_m(Scheme scheme, int z, int size);
 // and drawn_bound = quant_error + sag + mesh_eps > eps is what the tileset publishes.
 ErrorBudget tile_error_budget(double eps, Scheme scheme, int z, int size);
 
-// Encodes `mesh` (meshed from `raster` at budget.mesh_eps) as `format`.
+// The same rule for any grid: max_edge = max_edge_m / spacing_m samples (spacing_m: ground
+// metres per sample step, an upper bound), at least min_edge samples (at least
+// core::kMinMaxEdge), sag and mesh_eps following as above.
+ErrorBudget spacing_error_budget(double eps, double spacing_m, double min_edge);
+
+// Encodes `mesh` (meshed from the samples of `raster` at budget.mesh_eps) as `format`.
 // Positions are snapped to the budget's lattice in double precision (glb: ECEF axes, relative
 // to a lattice-aligned tile centre carried by the root node translation; drc: ENU axes at a
 // lattice-aligned origin) and handed to Draco with explicit quantization on that lattice, so
 // Draco's float32 dequantization reproduces them exactly. Vertex and triangle counts are kept
 // (no deduplication); triangles are wound counter-clockwise seen from above.
 // On return the decoded tile is within budget.eps of every valid sample of raster.grid
-// (heights interpolated linearly in tile grid coordinates, as the mesher measures them),
-// checked here: where the level lattice breaks that (a triangle steeper than kQuantMaxSlope),
-// interior vertices are snapped to s/2^k (k <= 6), of which s is a sublattice, so shared
-// border vertices still decode identically in both tiles.
+// (heights interpolated linearly in the raster's grid coordinates, as the mesher measures
+// them), checked here: where the level lattice breaks that (a triangle steeper than
+// kQuantMaxSlope), vertices off the border (mesh.border == 0) are snapped to s/2^k (k <= 6), of
+// which s is a sublattice, so shared border vertices still decode identically in both tiles.
+// A mesh without triangles (a tile whose data are all voids) encodes as an empty tile: a glb
+// whose scene has no node, a drc of no point.
 // Throws InputError when the tile is too large for the lattice (more than 2^23 steps across:
 // raise eps or zoom in), tb::Error if Draco fails or a border cliff cannot be kept within eps.
+// A measured point the drawn tile is also judged against, besides raster.grid: a source pixel
+// centre in the raster's grid coordinates, with its height in ellipsoidal metres.
+struct CheckPoint {
+    double column = 0, row = 0;
+    double height = 0;
+};
+// What encode_tile measured at the check points: the largest |snapped surface - height| (in
+// lon/lat-linear interpolation; the chord sag comes on top, bounded by budget.sag), and how many
+// points no triangle holds (they lie where the tile draws nothing).
+struct EncodeReport {
+    double points_error = 0;
+    std::size_t points_outside = 0;
+    // The bound the tile publishes (the .drc eps_m): budget.drawn_bound, or with check points
+    // the larger points_error + budget.sag.
+    double published = 0;
+};
+std::string encode_tile(const TileRaster& raster,
+                        const TileMesh& mesh,
+                        Format format,
+                        const ErrorBudget& budget,
+                        const std::vector<CheckPoint>& points = {},
+                        EncodeReport* report = nullptr);
+// The core mesh of raster's own lattice (every triangle kept), as to_tile_mesh gives it.
 std::string encode_tile(const TileRaster& raster,
                         const core::Mesh& mesh,
                         Format format,
@@ -96,6 +127,11 @@ struct TilesetSpec {
     std::function<double(int)> eps_for_zoom;
     std::function<bool(const TileId&)> has_tile; // exactly the tiles that make_tile produces
     int tile_size = 256;                         // N: tile rasters are (N+1) x (N+1) samples
+    // The budget of zoom z's tiles (quantization move and sag pad the regions); unset: the
+    // lattice budget tile_error_budget(eps_for_zoom(z), scheme, z, tile_size).
+    std::function<ErrorBudget(int)> budget_for_zoom;
+    // A tile's geometricError; unset: the budget's drawn bound.
+    std::function<double(const TileId&)> error_for_tile;
 };
 
 // The layer's documents, by path relative to the layer's URL root: "tileset.json" always,

@@ -42,10 +42,15 @@ std::string tile_path(const TileId& id) {
     return std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
 }
 
+ErrorBudget zoom_budget(const TilesetSpec& spec, int z) {
+    return spec.budget_for_zoom
+               ? spec.budget_for_zoom(z)
+               : tile_error_budget(spec.eps_for_zoom(z), spec.scheme, z, spec.tile_size);
+}
+
 Region tile_region(const TilesetSpec& spec, const TileId& id) {
     const LonLatBox b = tile_bounds(spec.scheme, id);
-    const ErrorBudget budget =
-        tile_error_budget(spec.eps_for_zoom(id.z), spec.scheme, id.z, spec.tile_size);
+    const ErrorBudget budget = zoom_budget(spec, id.z);
     // Snapping moves a vertex by at most s*sqrt(3)/2 <= s in any direction; straight
     // triangles, no edge longer than max_edge_m, sag below their vertices by at most
     // budget.sag.
@@ -67,8 +72,7 @@ Region tile_region(const TilesetSpec& spec, const TileId& id) {
 // The honest bound of what clients draw: eps(z) itself, chord sag being inside its budget
 // (except at zooms so coarse that one sample step sags by most of eps: then that sag counts).
 double tile_error(const TilesetSpec& spec, const TileId& id) {
-    return tile_error_budget(spec.eps_for_zoom(id.z), spec.scheme, id.z, spec.tile_size)
-        .drawn_bound;
+    return spec.error_for_tile ? spec.error_for_tile(id) : zoom_budget(spec, id.z).drawn_bound;
 }
 
 std::string region_json(const Region& r) {

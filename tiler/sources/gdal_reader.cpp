@@ -1,9 +1,9 @@
 // Reading DEMs for tiles: band 1 of one file or of an in-memory VRT mosaic, sampled bilinearly
 // at the global lattice of a zoom, one GDAL handle per concurrent reader.
 #include "core/error.hpp"
-#include "tiler/sources/gdal_source.hpp"
 #include "tiler/layer.hpp"
 #include "tiler/log.hpp"
+#include "tiler/sources/gdal_source.hpp"
 
 #include <cpl_conv.h>
 #include <cpl_error.h>
@@ -103,6 +103,8 @@ public:
         }
         if (georeferenced_) {
             compute_footprint();
+            grids_[0] = find_pixel_grid(Scheme::Geodetic);
+            grids_[1] = find_pixel_grid(Scheme::Mercator);
         }
         for (int k = 0; k < band->GetOverviewCount(); ++k) {
             GDALRasterBand* overview = band->GetOverview(k);
@@ -113,7 +115,7 @@ public:
         if (overviews_.empty() && static_cast<double>(info_.width) * info_.height > 4096.0 * 4096) {
             suggest_overviews(info_, open_name_ != info_.path);
         }
-        release(std::make_unique<Handle>(Handle{std::move(ds), {}, {}}));
+        release(std::make_unique<Handle>(Handle{std::move(ds), {}, {}, {}}));
     }
 
     const DemInfo& info() const override { return info_; }
@@ -166,6 +168,13 @@ public:
 
     core::HeightGrid read_all() const override;
 
+    std::optional<PixelGrid> pixel_grid(Scheme scheme) const override {
+        return grids_[scheme == Scheme::Geodetic ? 0 : 1];
+    }
+    std::vector<double>
+    read_pixels(std::int64_t column0, std::int64_t row0, int width, int height) const override;
+    std::vector<SourcePixel> pixels_in(const LonLatBox& box) const override;
+
 private:
     struct Overview {
         int index = 0, width = 0, height = 0;
@@ -176,6 +185,8 @@ private:
         // Scheme CRS -> source CRS, created on first use; null = identity.
         std::unique_ptr<OGRCoordinateTransformation> transform[2];
         bool transform_ready[2] = {false, false};
+        // Source CRS -> WGS84 lon/lat, created on first use.
+        std::unique_ptr<OGRCoordinateTransformation> to_lonlat;
     };
     struct HandleReturn {
         const GdalDemSource* owner;
@@ -202,7 +213,7 @@ private:
                 return Lease(h, HandleReturn{this});
             }
         }
-        auto h = std::make_unique<Handle>(Handle{open_dataset(), {}, {}});
+        auto h = std::make_unique<Handle>(Handle{open_dataset(), {}, {}, {}});
         return Lease(h.release(), HandleReturn{this});
     }
 
@@ -267,6 +278,45 @@ private:
                       std::min(north, 90.0)};
     }
 
+    // The pixel grid in the scheme's CRS (see DemSource::pixel_grid): the same CRS, or a
+    // geographic one whose transformation to WGS84 moves no pixel centre (checked at the corners
+    // and the centre of the pixel-centre hull to 1e-9 degrees, about 0.1 mm).
+    std::optional<PixelGrid> find_pixel_grid(Scheme scheme) const {
+        const auto& g = info_.geotransform;
+        if (g[2] != 0 || g[4] != 0 || !(g[1] > 0) || !(g[5] < 0)) {
+            return std::nullopt;
+        }
+        const char* options[] = {"IGNORE_DATA_AXIS_TO_SRS_AXIS_MAPPING=YES", nullptr};
+        const OGRSpatialReference mercator = scheme_srs(Scheme::Mercator);
+        if (scheme == Scheme::Mercator && mercator.IsSame(&srs_, options)) {
+            return PixelGrid{g[0], g[3], g[1], -g[5], info_.width, info_.height, false};
+        }
+        OGRSpatialReference target = scheme_srs(Scheme::Geodetic);
+        if (!target.IsSame(&srs_, options)) {
+            if (!srs_.IsGeographic()) {
+                return std::nullopt;
+            }
+            std::unique_ptr<OGRCoordinateTransformation> ct(
+                OGRCreateCoordinateTransformation(&srs_, &target));
+            if (!ct) {
+                return std::nullopt;
+            }
+            const double u[3] = {0.5, info_.width / 2.0, info_.width - 0.5};
+            const double v[3] = {0.5, info_.height / 2.0, info_.height - 0.5};
+            for (int a = 0; a < 3; ++a) {
+                for (int b = 0; b < 3; ++b) {
+                    const double x0 = g[0] + u[a] * g[1], y0 = g[3] + v[b] * g[5];
+                    double x = x0, y = y0;
+                    if (!ct->Transform(1, &x, &y) || !(std::abs(x - x0) <= 1e-9) ||
+                        !(std::abs(y - y0) <= 1e-9)) {
+                        return std::nullopt;
+                    }
+                }
+            }
+        }
+        return PixelGrid{g[0], g[3], g[1], -g[5], info_.width, info_.height, true};
+    }
+
     // Height of a raw sample, or NaN for nodata.
     double to_height(double raw) const {
         if (!std::isfinite(raw)) {
@@ -294,6 +344,7 @@ private:
     // Band 1's overviews as found at open; read_level() chooses from these alone, so the level
     // of a zoom is the same for every handle and every block.
     std::vector<Overview> overviews_;
+    std::optional<PixelGrid> grids_[2]; // geodetic, mercator
     mutable std::mutex mutex_;
     mutable std::vector<std::unique_ptr<Handle>> idle_;
 };
@@ -459,6 +510,133 @@ LatticeBlock GdalDemSource::sample(Scheme scheme,
     return out;
 }
 
+std::vector<double>
+GdalDemSource::read_pixels(std::int64_t column0, std::int64_t row0, int width, int height) const {
+    TB_ASSERT(width > 0 && height > 0);
+    std::vector<double> out(static_cast<std::size_t>(width) * height, NAN);
+    const std::int64_t c0 = std::max<std::int64_t>(column0, 0);
+    const std::int64_t r0 = std::max<std::int64_t>(row0, 0);
+    const std::int64_t c1 = std::min<std::int64_t>(column0 + width, info_.width);
+    const std::int64_t r1 = std::min<std::int64_t>(row0 + height, info_.height);
+    if (c0 >= c1 || r0 >= r1) {
+        return out;
+    }
+    const int ww = static_cast<int>(c1 - c0), wh = static_cast<int>(r1 - r0);
+    std::vector<double> window(static_cast<std::size_t>(ww) * wh);
+    Lease h = acquire();
+    CPLErrorReset();
+    if (h->ds->GetRasterBand(1)->RasterIO(GF_Read,
+                                          static_cast<int>(c0),
+                                          static_cast<int>(r0),
+                                          ww,
+                                          wh,
+                                          window.data(),
+                                          ww,
+                                          wh,
+                                          GDT_Float64,
+                                          0,
+                                          0,
+                                          nullptr) != CE_None) {
+        throw IoError(info_.path + ": read failed (" + gdal_message() + ")");
+    }
+    for (int j = 0; j < wh; ++j) {
+        for (int i = 0; i < ww; ++i) {
+            out[static_cast<std::size_t>(r0 - row0 + j) * width + (c0 - column0 + i)] =
+                to_height(window[static_cast<std::size_t>(j) * ww + i]);
+        }
+    }
+    return out;
+}
+
+std::vector<SourcePixel> GdalDemSource::pixels_in(const LonLatBox& box) const {
+    TB_ASSERT(georeferenced_);
+    Lease h = acquire();
+    // The window: the box outline, densified, in source pixel coordinates.
+    constexpr int kSteps = 32;
+    std::vector<double> xs, ys;
+    for (int k = 0; k <= kSteps; ++k) {
+        const double f = static_cast<double>(k) / kSteps;
+        const double lon = box.west + f * (box.east - box.west);
+        const double lat = box.south + f * (box.north - box.south);
+        xs.insert(xs.end(), {lon, lon, box.west, box.east});
+        ys.insert(ys.end(), {box.south, box.north, lat, lat});
+    }
+    std::vector<int> ok(xs.size(), 1);
+    if (OGRCoordinateTransformation* ct = transform_for(*h, Scheme::Geodetic)) {
+        ct->Transform(static_cast<int>(xs.size()), xs.data(), ys.data(), nullptr, ok.data());
+    }
+    double u_lo = INFINITY, u_hi = -INFINITY, v_lo = INFINITY, v_hi = -INFINITY;
+    const auto& t = inverse_;
+    for (std::size_t k = 0; k < xs.size(); ++k) {
+        if (!ok[k] || !std::isfinite(xs[k]) || !std::isfinite(ys[k])) {
+            continue;
+        }
+        const double u = t[0] + xs[k] * t[1] + ys[k] * t[2];
+        const double v = t[3] + xs[k] * t[4] + ys[k] * t[5];
+        u_lo = std::min(u_lo, u), u_hi = std::max(u_hi, u);
+        v_lo = std::min(v_lo, v), v_hi = std::max(v_hi, v);
+    }
+    std::vector<SourcePixel> out;
+    if (!(u_lo <= u_hi && v_lo <= v_hi)) {
+        return out;
+    }
+    // A margin of a few pixels covers the curvature of the box's edges between the probes.
+    const std::int64_t c0 = std::max<std::int64_t>(0, std::int64_t(std::floor(u_lo)) - 4);
+    const std::int64_t r0 = std::max<std::int64_t>(0, std::int64_t(std::floor(v_lo)) - 4);
+    const std::int64_t c1 = std::min<std::int64_t>(info_.width, std::int64_t(std::ceil(u_hi)) + 4);
+    const std::int64_t r1 = std::min<std::int64_t>(info_.height, std::int64_t(std::ceil(v_hi)) + 4);
+    if (c0 >= c1 || r0 >= r1) {
+        return out;
+    }
+    const double count = static_cast<double>(c1 - c0) * static_cast<double>(r1 - r0);
+    if (count > kMaxPixelsPerTile) {
+        throw InputError(info_.path + ": a tile at this zoom covers " +
+                         std::to_string(std::llround(count)) + " source pixels, more than the " +
+                         std::to_string(std::llround(kMaxPixelsPerTile)) +
+                         " one tile may read; use a finer min zoom");
+    }
+    const int ww = static_cast<int>(c1 - c0), wh = static_cast<int>(r1 - r0);
+    h.reset(); // read_pixels borrows a handle of its own
+    const std::vector<double> heights = read_pixels(c0, r0, ww, wh);
+    h = acquire();
+    if (!h->to_lonlat) {
+        OGRSpatialReference wgs84 = scheme_srs(Scheme::Geodetic);
+        h->to_lonlat.reset(OGRCreateCoordinateTransformation(&srs_, &wgs84));
+        if (!h->to_lonlat) {
+            throw InputError(info_.path + ": its CRS cannot be transformed to WGS84 lon/lat (" +
+                             gdal_message() + ")");
+        }
+    }
+    const auto& g = info_.geotransform;
+    std::vector<double> px, py;
+    std::vector<double> hs;
+    for (int j = 0; j < wh; ++j) {
+        for (int i = 0; i < ww; ++i) {
+            const double value = heights[static_cast<std::size_t>(j) * ww + i];
+            if (std::isnan(value)) {
+                continue;
+            }
+            const double u = static_cast<double>(c0 + i) + 0.5;
+            const double v = static_cast<double>(r0 + j) + 0.5;
+            px.push_back(g[0] + u * g[1] + v * g[2]);
+            py.push_back(g[3] + u * g[4] + v * g[5]);
+            hs.push_back(value);
+        }
+    }
+    std::vector<int> good(px.size(), 1);
+    if (!px.empty()) {
+        h->to_lonlat->Transform(
+            static_cast<int>(px.size()), px.data(), py.data(), nullptr, good.data());
+    }
+    for (std::size_t k = 0; k < px.size(); ++k) {
+        if (good[k] && px[k] >= box.west && px[k] <= box.east && py[k] >= box.south &&
+            py[k] <= box.north) {
+            out.push_back({px[k], py[k], hs[k]});
+        }
+    }
+    return out;
+}
+
 core::HeightGrid GdalDemSource::read_all() const {
     const int W = info_.width, H = info_.height;
     if (static_cast<double>(W) * H > 400e6) {
@@ -573,8 +751,8 @@ std::shared_ptr<const DemSource> DemSource::open(const std::vector<std::string>&
 
 void write_tile_raster_tiff(const TileRaster& raster, const std::string& path) {
     init_gdal();
-    const int n = raster.grid.width;
-    TB_ASSERT(n == raster.size + 1 && raster.grid.height == n);
+    const int w = raster.grid.width, hgt = raster.grid.height;
+    TB_ASSERT(w >= 1 && hgt >= 1 && raster.grid.heights.size() == std::size_t(w) * hgt);
     GDALDriver* driver = GetGDALDriverManager()->GetDriverByName("GTiff");
     if (!driver) {
         throw IoError(path + ": GDAL has no GTiff driver");
@@ -583,7 +761,7 @@ void write_tile_raster_tiff(const TileRaster& raster, const std::string& path) {
     CslPtr create_options(CSLSetNameValue(nullptr, "COMPRESS", "DEFLATE"));
     CPLErrorReset();
     GDALDatasetUniquePtr ds(
-        driver->Create(temp.c_str(), n, n, 1, GDT_Float32, create_options.get()));
+        driver->Create(temp.c_str(), w, hgt, 1, GDT_Float32, create_options.get()));
     if (!ds) {
         throw IoError(path + ": cannot create (" + gdal_message() + ")");
     }
@@ -593,19 +771,16 @@ void write_tile_raster_tiff(const TileRaster& raster, const std::string& path) {
         throw IoError(path + ": " + what + " (" + gdal_message() + ")");
     };
     // Sample (i, j) is the centre of pixel (i, j).
-    const std::int64_t c0 = tile_first_column(raster.scheme, raster.id, raster.size);
-    const std::int64_t r0 = tile_first_row(raster.scheme, raster.id, raster.size);
-    const double x0 = lattice_x(raster.scheme, raster.id.z, raster.size, c0);
-    const double y0 = lattice_y(raster.scheme, raster.id.z, raster.size, r0);
-    const double step = lattice_x(raster.scheme, raster.id.z, raster.size, c0 + 1) - x0;
-    double gt[6] = {x0 - step / 2, step, 0, y0 + step / 2, 0, -step};
+    const GridFrame f = frame_of(raster);
+    double gt[6] = {f.x0 - f.dx / 2, f.dx, 0, f.y0 + f.dy / 2, 0, -f.dy};
     OGRSpatialReference srs = scheme_srs(raster.scheme);
     std::vector<float> heights = raster.grid.heights;
     GDALRasterBand* band = ds->GetRasterBand(1);
     if (ds->SetGeoTransform(gt) != CE_None || ds->SetSpatialRef(&srs) != CE_None) {
         fail("cannot set georeferencing");
     }
-    if (band->RasterIO(GF_Write, 0, 0, n, n, heights.data(), n, n, GDT_Float32, 0, 0, nullptr) !=
+    if (band->RasterIO(
+            GF_Write, 0, 0, w, hgt, heights.data(), w, hgt, GDT_Float32, 0, 0, nullptr) !=
         CE_None) {
         fail("write failed");
     }
@@ -622,7 +797,7 @@ void write_tile_raster_tiff(const TileRaster& raster, const std::string& path) {
             mask[k] = raster.grid.valid[k] ? 255 : 0;
         }
         if (band->GetMaskBand()->RasterIO(
-                GF_Write, 0, 0, n, n, mask.data(), n, n, GDT_Byte, 0, 0, nullptr) != CE_None) {
+                GF_Write, 0, 0, w, hgt, mask.data(), w, hgt, GDT_Byte, 0, 0, nullptr) != CE_None) {
             fail("cannot write the void mask");
         }
     }

@@ -1,8 +1,8 @@
 #pragma once
 // What a DEM is, as GDAL reads it (band 1). GDAL types stay inside tiler/gdal_*.cpp.
 #include "core/mesh.hpp"
-#include "tiler/tile_grid.hpp"
 #include "tiler/sources/tile_raster.hpp"
+#include "tiler/tile_grid.hpp"
 
 #include <array>
 #include <cstdint>
@@ -68,6 +68,24 @@ struct ReadLevel {
     int step = 1;              // a power of two
 };
 
+// A source's pixel grid, axis-aligned with a scheme's tiles: pixel (i, j) of band 1 has its
+// centre at x = x0 + (i + 0.5) * dx, y = y0 - (j + 0.5) * dy (dx, dy > 0), lon/lat degrees or
+// EPSG:3857 metres.
+struct PixelGrid {
+    double x0 = 0, y0 = 0, dx = 0, dy = 0;
+    int width = 0, height = 0;
+    bool lonlat = true; // x, y are WGS84 lon/lat degrees; false: EPSG:3857 metres
+    double x(std::int64_t i) const { return x0 + (static_cast<double>(i) + 0.5) * dx; }
+    double y(std::int64_t j) const { return y0 - (static_cast<double>(j) + 0.5) * dy; }
+};
+
+// A valid source pixel centre: where it is and its height as read (scale/offset applied, datum
+// not converted).
+struct SourcePixel {
+    double lon = 0, lat = 0;
+    double height = 0;
+};
+
 // Band 1 of one DEM or of an in-memory VRT mosaic of several, opened for reading from many
 // threads: each call borrows a GDAL handle from a small pool (GDAL handles are not
 // thread-safe), so a DemSource is safe to share.
@@ -108,11 +126,34 @@ public:
                                 int width,
                                 int height) const = 0;
 
+    // The source's own pixel grid, when its rows and columns run along the scheme's tile
+    // borders: a north-up geotransform without rotation, and a CRS that is WGS84 lon/lat (or a
+    // geographic CRS that PROJ maps onto it unchanged, such as NAD83 without a datum grid), for
+    // both schemes (mercator tiles are lon/lat boxes too), or EPSG:3857 for mercator.
+    // Requires georeferenced().
+    virtual std::optional<PixelGrid> pixel_grid(Scheme scheme) const = 0;
+
+    // Band 1 at full resolution over columns [column0, column0 + width) and rows [row0, row0 +
+    // height), row-major; NaN where the source has nodata or the window leaves the raster.
+    // Thread-safe.
+    virtual std::vector<double>
+    read_pixels(std::int64_t column0, std::int64_t row0, int width, int height) const = 0;
+
+    // Every valid full-resolution pixel whose centre lies in `box` (closed), its centre
+    // transformed to WGS84 lon/lat. Throws InputError when the window it needs exceeds
+    // kMaxPixelsPerTile. Requires georeferenced(). Thread-safe.
+    virtual std::vector<SourcePixel> pixels_in(const LonLatBox& box) const = 0;
+
     // The whole band 1 at full resolution, row 0 = first raster row, nodata marked invalid and
     // filled (fill_voids, margin 0). Needs no georeferencing. Throws InputError when every
     // sample is nodata or above 400 Mpixel.
     virtual core::HeightGrid read_all() const = 0;
 };
+
+// The most source pixels one tile reads at full resolution (a tile of 2896 x 2896 pixels). Every
+// zoom meshes or checks the full-resolution pixels under a tile, so zooms whose tiles would hold
+// more are not offered (see Layer).
+inline constexpr double kMaxPixelsPerTile = 8.0 * 1024 * 1024;
 
 // Writes a tile raster as a georeferenced single-band Float32 GeoTIFF (EPSG:4326 or EPSG:3857
 // by scheme), the heights exactly as meshed, voids marked by an internal mask band. Written to
@@ -126,19 +167,6 @@ struct FloatGrid {
     std::vector<float> values;
 };
 FloatGrid read_float_grid(const std::string& path); // InputError when it cannot be read
-
-// ---- Tile lattice arithmetic (tiler/tile_raster.cpp) ----
-// The global sample lattice of zoom z for tiles of `size` samples: column c sits at native
-// x = x_min + c * step, row r at native y = y_max - r * step (degrees for geodetic, EPSG:3857
-// metres for mercator), step = tile width / size. Row 0 is the scheme's north edge. A tile's
-// sample (i, j) is lattice point (x * size + i, row_of_tile_top + j), so neighbours share
-// border samples exactly.
-double lattice_x(Scheme scheme, int z, int size, std::int64_t column);
-double lattice_y(Scheme scheme, int z, int size, std::int64_t row);
-std::int64_t tile_first_column(Scheme scheme, const TileId& id, int size);
-std::int64_t tile_first_row(Scheme scheme, const TileId& id, int size);
-LonLat native_to_lonlat(Scheme scheme, double x, double y);
-void lonlat_to_native(Scheme scheme, const LonLat& p, double& x, double& y);
 
 // Fills the voids of a `width` x `height` block of heights in place (valid = 0 entries).
 // With `margin` > 0 the block is a tile grid plus `margin` extra samples on every side, and

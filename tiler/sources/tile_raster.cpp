@@ -64,35 +64,39 @@ void lonlat_to_native(Scheme scheme, const LonLat& p, double& x, double& y) {
     y = kEarthRadius * std::log(std::tan(kPi / 4 + p.lat * kPi / 360.0));
 }
 
+GridFrame frame_of(const TileRaster& raster) {
+    if (raster.frame.dx > 0) {
+        return raster.frame;
+    }
+    GridFrame f;
+    f.x0 = lattice_x(raster.scheme,
+                     raster.id.z,
+                     raster.size,
+                     tile_first_column(raster.scheme, raster.id, raster.size));
+    f.y0 = lattice_y(raster.scheme,
+                     raster.id.z,
+                     raster.size,
+                     tile_first_row(raster.scheme, raster.id, raster.size));
+    f.dx = f.dy = tile_width(raster.scheme, raster.id.z) / raster.size;
+    return f;
+}
+
 LonLat grid_to_lonlat(const TileRaster& raster, double column, double row) {
-    const double step = tile_width(raster.scheme, raster.id.z) / raster.size;
-    const double x = lattice_x(raster.scheme,
-                               raster.id.z,
-                               raster.size,
-                               tile_first_column(raster.scheme, raster.id, raster.size)) +
-                     column * step;
-    const double y = lattice_y(raster.scheme,
-                               raster.id.z,
-                               raster.size,
-                               tile_first_row(raster.scheme, raster.id, raster.size)) -
-                     row * step;
-    return native_to_lonlat(raster.scheme, x, y);
+    const GridFrame f = frame_of(raster);
+    if (f.lonlat) {
+        return {f.x0 + column * f.dx, f.y0 - row * f.dy};
+    }
+    return native_to_lonlat(raster.scheme, f.x0 + column * f.dx, f.y0 - row * f.dy);
 }
 
 void lonlat_to_grid(const TileRaster& raster, const LonLat& p, double& column, double& row) {
-    const double step = tile_width(raster.scheme, raster.id.z) / raster.size;
-    double x = 0, y = 0;
-    lonlat_to_native(raster.scheme, p, x, y);
-    const double x0 = lattice_x(raster.scheme,
-                                raster.id.z,
-                                raster.size,
-                                tile_first_column(raster.scheme, raster.id, raster.size));
-    const double y0 = lattice_y(raster.scheme,
-                                raster.id.z,
-                                raster.size,
-                                tile_first_row(raster.scheme, raster.id, raster.size));
-    column = (x - x0) / step;
-    row = (y0 - y) / step;
+    const GridFrame f = frame_of(raster);
+    double x = p.lon, y = p.lat;
+    if (!f.lonlat) {
+        lonlat_to_native(raster.scheme, p, x, y);
+    }
+    column = (x - f.x0) / f.dx;
+    row = (f.y0 - y) / f.dy;
 }
 
 void fill_voids(std::vector<double>& heights,
