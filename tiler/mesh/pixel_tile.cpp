@@ -484,6 +484,7 @@ TileMesh mesh_pixel_tile(const PixelTile& t, const ErrorBudget& budget) {
     }
     out.triangles = std::move(kept);
     drop_unused_vertices(out);
+    split_nonmanifold_vertices(out);
     return out;
 }
 

@@ -73,6 +73,7 @@ TileMesh to_tile_mesh(const TileRaster& raster, const core::Mesh& mesh, bool dro
     }
     if (drop_voids) {
         drop_unused_vertices(out);
+        split_nonmanifold_vertices(out);
     }
     return out;
 }
@@ -100,6 +101,87 @@ void drop_unused_vertices(TileMesh& mesh) {
     mesh.border.resize(next);
     for (core::Index& v : mesh.triangles) {
         v = to[v];
+    }
+}
+
+void split_nonmanifold_vertices(TileMesh& mesh) {
+    const std::size_t n = mesh.vertex_count();
+    // Triangles around each vertex (CSR).
+    std::vector<std::uint32_t> start(n + 1, 0);
+    for (core::Index v : mesh.triangles) {
+        ++start[v + 1];
+    }
+    for (std::size_t v = 0; v < n; ++v) {
+        start[v + 1] += start[v];
+    }
+    std::vector<std::uint32_t> around(mesh.triangles.size());
+    {
+        std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
+        for (std::size_t e = 0; e < mesh.triangles.size(); ++e) {
+            around[fill[mesh.triangles[e]]++] = static_cast<std::uint32_t>(e / 3);
+        }
+    }
+    std::vector<std::uint32_t> group;
+    for (std::size_t v = 0; v < n; ++v) {
+        const std::uint32_t b = start[v], e = start[v + 1];
+        if (e - b < 2) {
+            continue;
+        }
+        // Union the triangles at v that share an edge (v, w): a small union-find over the fan.
+        const std::size_t k = e - b;
+        group.resize(k);
+        for (std::size_t i = 0; i < k; ++i) {
+            group[i] = static_cast<std::uint32_t>(i);
+        }
+        const auto find = [&](std::uint32_t i) {
+            while (group[i] != i) {
+                i = group[i] = group[group[i]];
+            }
+            return i;
+        };
+        const auto others = [&](std::uint32_t t, core::Index& a, core::Index& c) {
+            const core::Index* tri = &mesh.triangles[3 * static_cast<std::size_t>(t)];
+            const int at = tri[0] == v ? 0 : tri[1] == v ? 1 : 2;
+            a = tri[(at + 1) % 3];
+            c = tri[(at + 2) % 3];
+        };
+        for (std::size_t i = 0; i < k; ++i) {
+            core::Index a1 = 0, c1 = 0;
+            others(around[b + i], a1, c1);
+            for (std::size_t j = i + 1; j < k; ++j) {
+                core::Index a2 = 0, c2 = 0;
+                others(around[b + j], a2, c2);
+                if (a1 == a2 || a1 == c2 || c1 == a2 || c1 == c2) {
+                    group[find(static_cast<std::uint32_t>(i))] =
+                        find(static_cast<std::uint32_t>(j));
+                }
+            }
+        }
+        // Every fan but the first one's gets a copy of v.
+        std::vector<std::pair<std::uint32_t, core::Index>> copy_of; // root -> new vertex
+        const std::uint32_t first = find(0);
+        for (std::size_t i = 0; i < k; ++i) {
+            const std::uint32_t root = find(static_cast<std::uint32_t>(i));
+            if (root == first) {
+                continue;
+            }
+            core::Index to = core::kNone;
+            for (const auto& [r, w] : copy_of) {
+                if (r == root) {
+                    to = w;
+                }
+            }
+            if (to == core::kNone) {
+                to = mesh.add(mesh.x[v], mesh.y[v], mesh.z[v], mesh.border[v] != 0);
+                copy_of.push_back({root, to});
+            }
+            core::Index* tri = &mesh.triangles[3 * static_cast<std::size_t>(around[b + i])];
+            for (int q = 0; q < 3; ++q) {
+                if (tri[q] == v) {
+                    tri[q] = to;
+                }
+            }
+        }
     }
 }
 

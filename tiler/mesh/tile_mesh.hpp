@@ -41,6 +41,11 @@ bool holds_valid_sample(const core::HeightGrid& grid,
 // Removes the vertices no triangle uses, keeping the order of the others.
 void drop_unused_vertices(TileMesh& mesh);
 
+// Gives each vertex whose triangles form more than one fan (two groups touching only at it,
+// which dropping void triangles can leave) a copy per extra fan, so every vertex is manifold, as
+// Draco's mesh coder needs (it would split such a vertex itself and change the vertex count).
+void split_nonmanifold_vertices(TileMesh& mesh);
+
 // The grid coordinates (column, row) of vertex v of mesh in raster's frame.
 void vertex_grid_position(
     const TileRaster& raster, const TileMesh& mesh, std::size_t v, double& column, double& row);
