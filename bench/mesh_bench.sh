@@ -1,16 +1,22 @@
 #!/bin/bash
-# Mesher benchmark against delatin (Garland-Heckbert greedy insertion, the peer that honours
-# eps), run in the same session on the same heightmaps. Not a test.
+# Mesher benchmark against the greedy-insertion peers that honour eps, run in the same session
+# on the same heightmaps: delatin (npm) always, and hmm (fogleman/hmm, C++) when HMM names its
+# binary. Not a test.
 #
-#   bench/mesh_bench.sh [--reps N] [--quick]
+#   [HMM=/path/to/hmm] bench/mesh_bench.sh [--reps N] [--quick]
 #
 # Builds bench/mesh_bench in Release into build-bench (-DTB_BUILD_BENCH=ON), copies
 # ../shared/bench (read-only) to bench/runs/peer (git-ignored), installs delatin there with
 # npm, prepares the heightmaps with its tools, then for every case prints one TSV line:
-#   input size eps ms triangles achieved_max_err peer_triangles ratio peer_ms speed_ratio linf_check
-# ratio = our triangles / delatin's; speed_ratio = our samples/s / delatin's (same grid, so
-# delatin ms / our ms). linf_check is the shared independent checker's verdict on our mesh.
-# Exits 1 if any of our meshes misses a sample by more than eps.
+#   input size eps ms triangles achieved_max_err delatin_triangles delatin_ratio delatin_ms
+#   delatin_speed hmm_triangles hmm_ratio hmm_ms hmm_speed linf_check
+# *_ratio = our triangles / the peer's; *_speed = the peer's ms / our ms (same grid, so our
+# samples/s over the peer's). ms is a best of N: ours and hmm's runs alternate (one of each per
+# round, N rounds), delatin's N runs follow in one node process (its JIT warms up in-process).
+# hmm reads a lossless 16-bit PNG of the same heights (../shared/bench/to_png16.mjs), its -e
+# is eps in its own unit (see below), and its time is the "triangulating" time it prints.
+# Without HMM the hmm columns are "-". linf_check is the shared independent checker's verdict
+# on our mesh. Exits 1 if any of our meshes misses a sample by more than eps.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 shared=${TB_SHARED_BENCH:-$root/../shared/bench}
@@ -22,7 +28,7 @@ while [ $# -gt 0 ]; do
     case $1 in
         --reps) reps=$2; shift 2 ;;
         --quick) quick=1; shift ;;
-        *) echo "usage: $0 [--reps N] [--quick]" >&2; exit 2 ;;
+        *) echo "usage: [HMM=/path/to/hmm] $0 [--reps N] [--quick]" >&2; exit 2 ;;
     esac
 done
 
@@ -69,26 +75,75 @@ else
            "fuji-513 513 50,6")
 fi
 
+# ---- hmm (optional): HMM names a binary built from fogleman/hmm outside this repository ----
+hmm=${HMM:-}
+if [ -n "$hmm" ] && [ ! -x "$hmm" ]; then
+    echo "mesh_bench.sh: HMM=$hmm is not an executable" >&2
+    exit 2
+fi
+[ -n "$hmm" ] || echo "mesh_bench.sh: HMM not set, skipping hmm (HMM=/path/to/hmm $0 to run it)" >&2
+
+# min of two numbers, the first may be empty
+minimum() { awk -v a="$1" -v b="$2" 'BEGIN { print (a == "" || b + 0 < a + 0) ? b : a }'; }
+
 status=0
-printf 'input\tsize\teps\tms\ttriangles\tachieved_max_err\tpeer_triangles\tratio\tpeer_ms\tspeed_ratio\tlinf_check\n'
+printf 'input\tsize\teps\tms\ttriangles\tachieved_max_err\tdelatin_triangles\tdelatin_ratio'
+printf '\tdelatin_ms\tdelatin_speed\thmm_triangles\thmm_ratio\thmm_ms\thmm_speed\tlinf_check\n'
 for c in "${cases[@]}"; do
     read -r name size epss <<< "$c"
-    ours=$("$bench" --reps "$reps" --json "$runs/meshes" "$name=data/$name.f32:$size:$size" "$epss") ||
-        status=1
+    if [ -n "$hmm" ]; then
+        # hmm reads a 16-bit PNG and divides its values by 65535: with to_png16's quantum q
+        # (k = (h - min) / q, exact here) one hmm height unit is unit = q * 65535 of ours, so
+        # eps of ours is eps / unit of hmm's (-e; -z only scales its output). A lossy PNG moves
+        # heights by up to max_quant_error: eps is tightened by that much.
+        png=$runs/meshes/$name.png
+        q=$(node to_png16.mjs "data/$name.f32" "$size" "$size" "$png")
+        unit=$(sed 's/.*"unit":\([0-9.e+-]*\).*/\1/' <<< "$q")
+        lossy=$(sed 's/.*"max_quant_error":\([0-9.e+-]*\).*/\1/' <<< "$q")
+        grep -q '"lossless":true' <<< "$q" && lossy=0 ||
+            echo "mesh_bench.sh: $name is not exact in 16 bits (max rounding $lossy)" >&2
+    fi
+    declare -A ms=() hms=() htris=()
+    ours=""
+    # Rounds: ours then hmm at every eps, so both see the same load; best of the rounds.
+    for ((r = 0; r < reps; ++r)); do
+        for eps in ${epss//,/ }; do
+            json=()
+            [ "$r" = 0 ] && json=(--json "$runs/meshes")
+            line=$("$bench" --reps 1 "${json[@]}" "$name=data/$name.f32:$size:$size" "$eps" |
+                tail -n 1) || status=1
+            [ "$r" = 0 ] && ours+="$line"$'\n'
+            ms[$eps]=$(minimum "${ms[$eps]:-}" "$(cut -f4 <<< "$line")")
+            if [ -n "$hmm" ]; then
+                e=$(awk -v e="$eps" -v l="$lossy" -v u="$unit" 'BEGIN { printf "%.9g", (e - l) / u }')
+                out=$("$hmm" "$png" "$runs/meshes/hmm-$name-eps$eps.stl" -z 65535 -e "$e")
+                t=$(sed -n 's/^triangulating\.\.\. \([0-9.e+-]*\)s$/\1/p' <<< "$out")
+                hms[$eps]=$(minimum "${hms[$eps]:-}" "$(awk -v t="$t" 'BEGIN { printf "%.1f", t * 1000 }')")
+                htris[$eps]=$(sed -n 's/^  triangles = \([0-9]*\)$/\1/p' <<< "$out")
+            fi
+        done
+    done
     theirs=$(node run_js_peer.mjs delatin "data/$name.f32" "$size" "$size" "$epss" "$runs/meshes" \
         --reps "$reps")
-    while IFS=$'\t' read -r input sz eps ms tris err _ _; do
-        [ "$input" = input ] && continue
+    while IFS=$'\t' read -r input sz eps _ tris err _ _; do
+        [ -z "$input" ] && continue
         line=$(grep "\"eps\":$eps," <<< "$theirs" || true)
         ptris=$(sed 's/.*"triangles":\([0-9]*\).*/\1/' <<< "$line")
         pms=$(sed 's/.*"ms":\([0-9.]*\).*/\1/' <<< "$line")
         verdict=ok
         ./linf_check "data/$name.f32" "$size" "$size" "$runs/meshes/$name-eps$eps.json" \
             --eps "$eps" > /dev/null 2>&1 || { verdict=FAIL; status=1; }
+        t=${ms[$eps]}
         ratio=$(awk -v a="$tris" -v b="$ptris" 'BEGIN { printf "%.3f", a / b }')
-        speed=$(awk -v a="$ms" -v b="$pms" 'BEGIN { printf "%.2f", b / a }')
-        printf '%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\n' "$input" "$sz" "$eps" "$ms" "$tris" \
-            "$err" "$ptris" "$ratio" "$pms" "$speed" "$verdict"
+        speed=$(awk -v a="$t" -v b="$pms" 'BEGIN { printf "%.2f", b / a }')
+        hcols="-\t-\t-\t-"
+        if [ -n "$hmm" ]; then
+            hcols=$(awk -v a="$tris" -v b="${htris[$eps]}" -v t="$t" -v h="${hms[$eps]}" \
+                'BEGIN { printf "%d\t%.3f\t%s\t%.2f", b, a / b, h, h / t }')
+        fi
+        printf '%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%b\t%s\n' "$input" "$sz" "$eps" "$t" \
+            "$tris" "$err" "$ptris" "$ratio" "$pms" "$speed" "$hcols" "$verdict"
     done <<< "$ours"
+    unset ms hms htris
 done
 exit $status
