@@ -4,6 +4,9 @@
 #include "core/error.hpp"
 #include "tiler/log.hpp"
 
+#include <sys/resource.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <chrono>
 #include <condition_variable>
@@ -19,6 +22,9 @@
 
 namespace tb::server {
 namespace {
+
+// Nice value of the generation threads (0 is the default, 19 the lowest priority).
+constexpr int kGenerationNice = 10;
 
 // Default ceiling of TileServiceOptions::max_waiting (each waiter holds an HTTP thread).
 constexpr long long kMaxWaiting = 1024;
@@ -85,7 +91,15 @@ class Pool {
 public:
     explicit Pool(int threads) {
         for (int i = 0; i < threads; ++i) {
-            threads_.emplace_back([this] { work(); });
+            threads_.emplace_back([this] {
+                // Generation yields the CPU to the threads that answer requests, so that health
+                // checks and cache hits stay fast while every core meshes. Linux sets the nice
+                // value per thread, and the mesher's own threads inherit it.
+                if (setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), kGenerationNice) != 0) {
+                    log::debug("cannot lower the priority of a generation thread");
+                }
+                work();
+            });
         }
     }
     ~Pool() {
