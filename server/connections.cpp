@@ -100,7 +100,7 @@ struct Connections::Impl {
     std::unordered_map<std::uint64_t, Conn> conns;
     std::uint64_t next_id = 1;
     std::thread loop_thread;
-    std::atomic<bool> loop_done{false};
+    bool loop_done = false; // under `mutex`
 
     Impl(const ConnectionLimits& l, int n_workers, ConnectionHandlers h, Metrics& m)
         : limits(l), handlers(std::move(h)), metrics(m) {
@@ -489,11 +489,11 @@ struct Connections::Impl {
             if (draining_now && conns.empty()) {
                 std::lock_guard<std::mutex> lock(mutex);
                 if (adopted.empty() && replies.empty()) {
+                    loop_done = true; // adopt() closes what still comes in
                     break;
                 }
             }
         }
-        loop_done = true;
     }
 };
 
@@ -508,6 +508,10 @@ Connections::~Connections() = default;
 void Connections::adopt(int fd) {
     {
         std::lock_guard<std::mutex> lock(impl_->mutex);
+        if (impl_->loop_done) {
+            close(fd);
+            return;
+        }
         impl_->adopted.push_back(fd);
     }
     impl_->wake();
