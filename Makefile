@@ -1,13 +1,13 @@
 # The two commands a new user needs (see README.md):
 #   make run    install, build, and serve the demo DEM on http://127.0.0.1:8080/
 #   make test   install, build, and run every test
-# Also: make build, make bench, make format.
+# Also: make build, make bench, make fuzz, make format.
 
 JOBS ?= $(shell nproc)
 PORT ?= 8080
 HOST ?= 127.0.0.1
 
-.PHONY: setup build build-test run test bench format clean
+.PHONY: setup build build-test run test bench fuzz format clean
 
 setup:
 	scripts/setup.sh
@@ -31,8 +31,12 @@ test: build-test
 bench: setup
 	bench/mesh_bench.sh
 
+# libFuzzer harnesses (clang, ASan) for FUZZ_SECONDS each; see tests/fuzz/run.sh.
+fuzz: setup
+	tests/fuzz/run.sh
+
 format:
 	clang-format -i $$(git ls-files '*.cpp' '*.hpp')
 
 clean:
-	rm -rf build build-test build-bench
+	rm -rf build build-test build-bench build-fuzz

@@ -453,8 +453,9 @@ Config parse_config(const std::string& text, const std::string& path) {
     json root;
     try {
         root = json::parse(text);
-    } catch (const json::parse_error& e) {
-        // e.what() is "[json.exception.parse_error.101] parse error at line 3, column 5: ...".
+    } catch (const json::exception& e) {
+        // e.what() is "[json.exception.parse_error.101] parse error at line 3, column 5: ...",
+        // or out_of_range.406 for a number too large for a double ("2e308").
         std::string what = e.what();
         const auto close = what.find("] ");
         if (close != std::string::npos) {

@@ -8,11 +8,18 @@
 
 #include <httplib.h>
 
+#include <fcntl.h>
+#include <sys/resource.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
+#include <cerrno>
 #include <charconv>
 #include <chrono>
 #include <cstdio>
+#include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <mutex>
 #include <sstream>
@@ -34,6 +41,10 @@ struct RequestContext {
     bool active = false;
 };
 thread_local RequestContext t_request;
+// The request's Accept-Encoding. It is taken off the request before routing, so that
+// cpp-httplib never compresses a response itself (it would, on every request, and ignores
+// q=0); send_blob compresses documents once per ETag instead.
+thread_local std::string t_accept_encoding;
 
 std::string json_escape(std::string_view text) {
     std::string out;
@@ -229,33 +240,209 @@ bool not_modified(const httplib::Request& req, const std::string& etag) {
     return false;
 }
 
+// Documents shorter than this are sent as they are: compression would hardly shrink them.
+constexpr std::size_t kMinCompressBytes = 256;
+
+// Sends `blob`; `metrics` non-null: it is a document that may be compressed (JSON), in the
+// coding the client's Accept-Encoding prefers, made once per blob.
 void send_blob(const httplib::Request& req,
                httplib::Response& res,
                const Blob& blob,
                const char* media_type,
-               const char* cache_control) {
+               const char* cache_control,
+               Metrics* metrics = nullptr) {
     res.set_header("ETag", blob.etag);
     res.set_header("Cache-Control", cache_control);
+    if (metrics) {
+        res.set_header("Vary", "Accept-Encoding");
+    }
     if (not_modified(req, blob.etag)) {
         res.status = 304;
         return;
     }
     res.status = 200;
-    res.set_content(blob.bytes, media_type);
+    const Coding coding = metrics && blob.bytes.size() >= kMinCompressBytes
+                              ? pick_coding(t_accept_encoding)
+                              : Coding::Identity;
+    if (coding == Coding::Identity) {
+        res.set_content(blob.bytes, media_type);
+        return;
+    }
+    res.set_content(blob.encoded(coding, *metrics), media_type);
+    res.set_header("Content-Encoding", coding_name(coding));
 }
 
-// cpp-httplib 0.11.4 listens with a backlog of 5: a burst of more simultaneous connections
-// overflows the accept queue, and the dropped SYNs are retried by the client a second later.
-// Listening again on the bound socket raises the backlog (Linux and BSD allow it).
+const char* status_text(int status) {
+    switch (status) {
+    case 400:
+        return "Bad Request";
+    case 408:
+        return "Request Timeout";
+    case 413:
+        return "Payload Too Large";
+    case 414:
+        return "URI Too Long";
+    case 431:
+        return "Request Header Fields Too Large";
+    case 501:
+        return "Not Implemented";
+    case 503:
+        return "Service Unavailable";
+    case 505:
+        return "HTTP Version Not Supported";
+    default:
+        return "Error";
+    }
+}
+
+// Media types of the viewer's files, by extension; others are application/octet-stream.
+const char* file_media_type(const std::string& path) {
+    static const std::pair<const char*, const char*> types[] = {
+        {"html", "text/html; charset=utf-8"},
+        {"htm", "text/html; charset=utf-8"},
+        {"js", "text/javascript"},
+        {"mjs", "text/javascript"},
+        {"cjs", "text/javascript"},
+        {"css", "text/css"},
+        {"json", "application/json"},
+        {"wasm", "application/wasm"},
+        {"glb", "model/gltf-binary"},
+        {"gltf", "model/gltf+json"},
+        {"png", "image/png"},
+        {"jpg", "image/jpeg"},
+        {"jpeg", "image/jpeg"},
+        {"gif", "image/gif"},
+        {"svg", "image/svg+xml"},
+        {"webp", "image/webp"},
+        {"ico", "image/x-icon"},
+        {"ktx2", "image/ktx2"},
+        {"txt", "text/plain; charset=utf-8"},
+        {"xml", "application/xml"},
+        {"woff", "font/woff"},
+        {"woff2", "font/woff2"},
+        {"ttf", "font/ttf"},
+    };
+    const auto dot = path.rfind('.');
+    const auto slash = path.rfind('/');
+    if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) {
+        return "application/octet-stream";
+    }
+    std::string ext = path.substr(dot + 1);
+    for (char& c : ext) {
+        c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    }
+    for (const auto& [e, type] : types) {
+        if (ext == e) {
+            return type;
+        }
+    }
+    return "application/octet-stream";
+}
+
+// True when canonical path `p` is `root` or lies below it (both canonical, no trailing '/').
+bool within(const std::filesystem::path& p, const std::filesystem::path& root) {
+    const std::string ps = p.string(), rs = root.string();
+    return ps == rs || (ps.size() > rs.size() && ps.compare(0, rs.size(), rs) == 0 &&
+                        (rs.back() == '/' || ps[rs.size()] == '/'));
+}
+
+// The request bytes of one framed request, read by cpp-httplib's parser; what it writes is the
+// response. Reading stops at the end of this request, so it can never eat into the next one.
+class MemoryStream final : public httplib::Stream {
+public:
+    MemoryStream(std::string_view in, const Peer& peer, std::string& out)
+        : in_(in), peer_(peer), out_(out) {}
+    bool is_readable() const override { return pos_ < in_.size(); }
+    bool is_writable() const override { return true; }
+    ssize_t read(char* ptr, size_t size) override {
+        const std::size_t n = std::min(size, in_.size() - pos_);
+        std::memcpy(ptr, in_.data() + pos_, n);
+        pos_ += n;
+        return static_cast<ssize_t>(n);
+    }
+    ssize_t write(const char* ptr, size_t size) override {
+        out_.append(ptr, size);
+        return static_cast<ssize_t>(size);
+    }
+    void get_remote_ip_and_port(std::string& ip, int& port) const override {
+        ip = peer_.ip;
+        port = peer_.port;
+    }
+    void get_local_ip_and_port(std::string& ip, int& port) const override {
+        ip.clear();
+        port = 0;
+    }
+    socket_t socket() const override { return INVALID_SOCKET; }
+
+private:
+    std::string_view in_;
+    std::size_t pos_ = 0;
+    const Peer& peer_;
+    std::string& out_;
+};
+
+// cpp-httplib's accept loop hands each connection to a task queue; this one runs the task at
+// once, as it only passes the socket on to the connection loop.
+class InlineQueue final : public httplib::TaskQueue {
+public:
+    void enqueue(std::function<void()> fn) override { fn(); }
+    void shutdown() override {}
+};
+
+// cpp-httplib 0.11.4 gives each connection a thread of its own for its whole life, reading
+// requests one by one with blocking reads: idle and slow clients then starve everyone else,
+// and bytes of pipelined requests are lost. Its per-connection entry point is virtual, and
+// its request parser and router (process_request) take any Stream; so this server hands
+// accepted sockets to its own connection loop (server/connections.hpp), which frames each
+// request and calls process_request on a worker with the request's bytes in memory.
 class Server : public httplib::Server {
 public:
+    std::function<void(socket_t)> adopt;
+
+    // Parses, routes and answers one request held in `strm`.
+    bool answer(httplib::Stream& strm,
+                bool last,
+                bool& closed,
+                const std::function<void(httplib::Request&)>& setup) {
+        return process_request(strm, last, closed, setup);
+    }
+
+    // cpp-httplib 0.11.4 listens with a backlog of 5: a burst of more simultaneous connections
+    // overflows the accept queue, and the dropped SYNs are retried by the client a second
+    // later. Listening again on the bound socket raises the backlog (Linux and BSD allow it).
     void raise_backlog() {
         const socket_t sock = svr_sock_;
         if (sock != INVALID_SOCKET && ::listen(sock, SOMAXCONN) != 0) {
             log::warn("cannot raise the listen backlog; bursts of connections may stall");
         }
     }
+
+private:
+    bool process_and_close_socket(socket_t sock) override {
+        adopt(sock);
+        return true;
+    }
 };
+
+// Raises the soft limit of open files to the hard one (many idle connections are fine, each
+// is a descriptor), and returns how many connections fit in it.
+std::size_t connection_capacity(std::size_t wanted) {
+    rlimit lim{};
+    if (getrlimit(RLIMIT_NOFILE, &lim) != 0) {
+        return wanted;
+    }
+    if (lim.rlim_cur < lim.rlim_max) {
+        rlimit raised = lim;
+        raised.rlim_cur = lim.rlim_max;
+        if (setrlimit(RLIMIT_NOFILE, &raised) == 0) {
+            lim = raised;
+        }
+    }
+    // Keep descriptors for stores, DEMs, files of the viewer and the process itself.
+    constexpr rlim_t kReserve = 256;
+    const rlim_t room = lim.rlim_cur > 2 * kReserve ? lim.rlim_cur - kReserve : lim.rlim_cur / 2;
+    return std::min<std::size_t>(wanted, static_cast<std::size_t>(room));
+}
 
 } // namespace
 
@@ -267,17 +454,170 @@ struct HttpServer::Impl {
     int port = 0;
     std::mutex stop_mutex;
     bool stop_requested = false;
+    std::vector<std::filesystem::path> web_roots; // canonical; files are served from these only
+    std::shared_ptr<const Blob> layers_blob;      // /layers never changes while serving
+    std::unique_ptr<Connections> connections;     // last: stopped first
 
     Impl(TileService& t, Metrics& m, const HttpOptions& o) : tiles(t), metrics(m), options(o) {
-        const int threads = std::max(2, options.http_threads);
-        server.new_task_queue = [threads] { return new httplib::ThreadPool(threads); };
-        server.set_keep_alive_max_count(1000);
-        server.set_keep_alive_timeout(5);
-        server.set_read_timeout(10);
-        server.set_write_timeout(10);
-        server.set_payload_max_length(64 * 1024);
-        server.set_tcp_nodelay(true);
+        const auto& limits = options.limits;
+        server.new_task_queue = [] { return new InlineQueue; };
+        // These only shape the Keep-Alive header now; the connection loop enforces them.
+        server.set_keep_alive_max_count(static_cast<std::size_t>(limits.max_requests));
+        server.set_keep_alive_timeout(std::max<time_t>(
+            1, std::chrono::duration_cast<std::chrono::seconds>(limits.idle_timeout).count()));
+        server.set_payload_max_length(limits.head.body_bytes);
+        // SO_REUSEADDR alone: cpp-httplib's default adds SO_REUSEPORT, with which a second
+        // server on the same port starts "successfully" and steals part of the connections.
+        server.set_socket_options([](socket_t sock) {
+            const int yes = 1;
+            setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
+        });
+        if (!options.web_root.empty()) {
+            namespace fs = std::filesystem;
+            std::error_code ec;
+            const fs::path root = fs::canonical(options.web_root, ec);
+            if (ec) {
+                throw IoError(options.web_root + ": the viewer directory cannot be served (" +
+                              ec.message() + ")");
+            }
+            web_roots.push_back(root);
+            // node_modules may be a link to a shared install (workspaces); it is the one link
+            // followed out of the directory, fixed here at startup.
+            const fs::path modules = fs::canonical(root / "node_modules", ec);
+            if (!ec && !within(modules, root)) {
+                web_roots.push_back(modules);
+            }
+        }
+        layers_blob = [this] {
+            auto blob = std::make_shared<Blob>();
+            blob->bytes = layers_json();
+            blob->etag = make_etag(blob->bytes);
+            return blob;
+        }();
         install();
+        ConnectionLimits capped = limits;
+        capped.max_connections = connection_capacity(limits.max_connections);
+        ConnectionHandlers handlers;
+        handlers.answer = [this](std::string_view request, const Peer& peer, bool last) {
+            return answer(request, peer, last);
+        };
+        handlers.refuse = [this](int status, const std::string& why, const Peer& peer) {
+            return refuse(status, why, peer);
+        };
+        connections =
+            std::make_unique<Connections>(capped,
+                                          std::max(2, options.http_threads) + tiles.max_waiting(),
+                                          std::move(handlers),
+                                          metrics);
+        server.adopt = [this](socket_t sock) { connections->adopt(sock); };
+    }
+
+    Reply answer(std::string_view request, const Peer& peer, bool last) {
+        Reply reply;
+        MemoryStream strm(request, peer, reply.bytes);
+        bool closed = false;
+        bool ok = false;
+        try {
+            ok = server.answer(strm, last, closed, [](httplib::Request& req) {
+                t_accept_encoding.clear();
+                const auto it = req.headers.find("Accept-Encoding");
+                if (it != req.headers.end()) {
+                    t_accept_encoding = it->second.substr(0, 1024);
+                }
+                req.headers.erase("Accept-Encoding");
+            });
+        } catch (const std::exception& e) {
+            // Handlers do not throw past the exception handler; this is cpp-httplib itself.
+            log::error(std::string("answering a request failed: ") + e.what());
+        }
+        if (t_request.active) {
+            --metrics.in_flight_requests;
+            t_request.active = false;
+        }
+        reply.close = !ok || closed || last || reply.bytes.empty();
+        return reply;
+    }
+
+    // The answer to a request the connection loop could not frame (or that came too slowly):
+    // one JSON error, and the connection closes.
+    std::string refuse(int status, const std::string& why, const Peer& peer) {
+        metrics.record_request(status == 503 ? "refused" : "malformed", status, 0.0);
+        log::info(peer.ip + ":" + std::to_string(peer.port) + " " + std::to_string(status) + " " +
+                  why + "; connection closed");
+        const std::string body = "{\"error\":\"" + json_escape(why) + "\"}\n";
+        std::string text =
+            "HTTP/1.1 " + std::to_string(status) + " " + status_text(status) +
+            "\r\nContent-Type: application/json\r\nContent-Length: " + std::to_string(body.size()) +
+            "\r\nCache-Control: no-store\r\nConnection: close\r\n";
+        if (!options.cors_origins.empty()) {
+            bool any = false;
+            for (const auto& o : options.cors_origins) {
+                any = any || o == "*";
+            }
+            if (any) {
+                text += "Access-Control-Allow-Origin: *\r\n";
+            }
+        }
+        if (status == 503) {
+            text += "Retry-After: " + std::to_string(kRetryAfterSeconds) + "\r\n";
+        }
+        return text + "\r\n" + body;
+    }
+
+    // A file of the viewer: `rel` is the decoded path below /web/ (bad_path has refused '..',
+    // NUL, backslashes and encoded separators). The real path, links resolved, must lie in one
+    // of web_roots, whatever links the directory holds.
+    void serve_web_file(const std::string& rel, httplib::Response& res) {
+        namespace fs = std::filesystem;
+        const auto refuse_missing = [&] {
+            throw NotFound("no file /web/" + rel.substr(0, 200) + " in the viewer");
+        };
+        std::error_code ec;
+        fs::path real = fs::canonical(web_roots.front() / rel, ec);
+        if (ec) {
+            refuse_missing();
+        }
+        if (fs::is_directory(real, ec)) {
+            real = fs::canonical(real / "index.html", ec);
+            if (ec) {
+                refuse_missing();
+            }
+        }
+        bool inside = false;
+        for (const auto& root : web_roots) {
+            inside = inside || within(real, root);
+        }
+        if (!inside) {
+            log::warn("/web/" + rel.substr(0, 200) + " leads out of the viewer's directory (to " +
+                      real.string().substr(0, 200) + "); refused");
+            refuse_missing();
+        }
+        // O_NOFOLLOW: the last component cannot have become a link since it was resolved.
+        const int fd = ::open(real.c_str(), O_RDONLY | O_NOFOLLOW | O_CLOEXEC);
+        if (fd < 0) {
+            refuse_missing();
+        }
+        struct stat st {};
+        std::string bytes;
+        const bool regular = fstat(fd, &st) == 0 && S_ISREG(st.st_mode);
+        if (regular) {
+            bytes.resize(static_cast<std::size_t>(st.st_size));
+            std::size_t got = 0;
+            while (got < bytes.size()) {
+                const ssize_t n = ::read(fd, bytes.data() + got, bytes.size() - got);
+                if (n <= 0) {
+                    break;
+                }
+                got += static_cast<std::size_t>(n);
+            }
+            bytes.resize(got);
+        }
+        ::close(fd);
+        if (!regular) {
+            refuse_missing();
+        }
+        res.set_header("Cache-Control", "public, max-age=3600");
+        res.set_content(std::move(bytes), file_media_type(real.string()));
     }
 
     void cors(const httplib::Request& req, httplib::Response& res) const {
@@ -451,25 +791,11 @@ struct HttpServer::Impl {
             res.set_header("Allow", "GET, HEAD, OPTIONS");
         });
 
-        if (!options.web_root.empty()) {
-            // The viewer's static files. cpp-httplib matches mount points before any route and
-            // refuses paths that climb out of the directory.
-            for (const auto& [ext, type] :
-                 std::initializer_list<std::pair<const char*, const char*>>{
-                     {"js", "text/javascript"},
-                     {"mjs", "text/javascript"},
-                     {"wasm", "application/wasm"},
-                     {"json", "application/json"},
-                     {"css", "text/css"},
-                     {"glb", "model/gltf-binary"}}) {
-                server.set_file_extension_and_mimetype_mapping(ext, type);
-            }
-            if (!server.set_mount_point("/web", options.web_root)) {
-                throw IoError(options.web_root + ": the viewer directory cannot be served");
-            }
-            server.set_file_request_handler([](const httplib::Request&, httplib::Response& res) {
+        if (!web_roots.empty()) {
+            // The viewer's static files; before the layer routes, which would match too.
+            server.Get(R"(/web/(.*))", [this](const httplib::Request& req, httplib::Response& res) {
                 t_request.route = "web";
-                res.set_header("Cache-Control", "public, max-age=3600");
+                serve_web_file(req.matches[1].str(), res);
             });
         }
 
@@ -504,11 +830,7 @@ struct HttpServer::Impl {
 
         server.Get("/layers", [this](const httplib::Request& req, httplib::Response& res) {
             t_request.route = "layers";
-            Blob blob;
-            blob.bytes = layers_json();
-            blob.etag = make_etag(blob.bytes);
-            send_blob(req, res, blob, "application/json", kDocumentCacheControl);
-            res.set_header("Vary", "Accept-Encoding");
+            send_blob(req, res, *layers_blob, "application/json", kDocumentCacheControl, &metrics);
         });
 
         // Repeated slashes are tolerated ("/dem//8/1/2.glb"): some clients join a base URL that
@@ -535,10 +857,8 @@ struct HttpServer::Impl {
                                  res,
                                  *blob,
                                  json ? "application/json" : "application/octet-stream",
-                                 kDocumentCacheControl);
-                       if (json && res.status == 200) {
-                           res.set_header("Vary", "Accept-Encoding");
-                       }
+                                 kDocumentCacheControl,
+                                 json ? &metrics : nullptr);
                    });
     }
 
@@ -586,18 +906,29 @@ HttpServer::~HttpServer() = default;
 
 int HttpServer::bind() {
     Impl& s = *impl_;
-    if (s.options.port == 0) {
-        s.port = s.server.bind_to_any_port(s.options.host);
-        if (s.port <= 0) {
-            throw IoError("cannot listen on " + s.options.host +
-                          "; check the host name or address");
+    const std::string where = s.options.host + ":" + std::to_string(s.options.port);
+    errno = 0;
+    const bool bound = s.options.port == 0
+                           ? (s.port = s.server.bind_to_any_port(s.options.host)) > 0
+                           : s.server.bind_to_port(s.options.host, s.options.port);
+    if (!bound) {
+        const int err = errno;
+        if (err == EADDRINUSE) {
+            throw InputError("cannot listen on " + where +
+                             ": the port is in use by another program; stop it, or pick "
+                             "another port with --port (0 picks a free one)");
         }
-    } else {
-        if (!s.server.bind_to_port(s.options.host, s.options.port)) {
-            throw IoError("cannot listen on " + s.options.host + ":" +
-                          std::to_string(s.options.port) +
-                          "; is another server using the port? pick one with --port");
+        if (err == EACCES) {
+            throw InputError("cannot listen on " + where +
+                             ": permission denied (ports below 1024 need privileges); pick "
+                             "another port with --port");
         }
+        throw InputError(
+            "cannot listen on " + where + ": " +
+            (err != 0 ? std::string(std::strerror(err)) : std::string("no such address")) +
+            "; check --host (an address of this machine, or 0.0.0.0)");
+    }
+    if (s.options.port != 0) {
         s.port = s.options.port;
     }
     s.server.raise_backlog();
@@ -612,6 +943,7 @@ void HttpServer::run() {
         }
     }
     impl_->server.listen_after_bind();
+    impl_->connections->drain(); // answers what has fully arrived, then closes everything
 }
 
 void HttpServer::stop() {
@@ -622,6 +954,10 @@ void HttpServer::stop() {
 
 bool HttpServer::running() const {
     return impl_->server.is_running();
+}
+
+Reply HttpServer::answer(std::string_view request, bool last) {
+    return impl_->answer(request, Peer{"127.0.0.1", 0}, last);
 }
 
 } // namespace tb::server

@@ -8,6 +8,7 @@
 //   GET /{layer}/{z}/{x}/{y}.{glb|drc}  a tile; ?eps=K picks the layer's eps_levels[K]
 //   GET /{layer}/{document path}        tileset.json, subtrees, ... (whatever the layer has)
 // HEAD works wherever GET does; OPTIONS answers CORS preflights.
+#include "server/connections.hpp"
 #include "server/metrics.hpp"
 #include "server/tile_service.hpp"
 
@@ -21,8 +22,13 @@ struct HttpOptions {
     std::string host = "127.0.0.1";
     int port = 8080; // 0: any free port (see bind())
     std::vector<std::string> cors_origins = {"*"};
-    int http_threads = 16; // connection-handling threads
-    std::string web_root;  // the viewer's directory (index.html, node_modules/); empty: none
+    // Worker threads for requests that do not wait for a generation (health, cached tiles,
+    // documents, files). The pool gets one more per request TileService lets wait for a
+    // generation (TileService::max_waiting), so those can never take all of it. Connections
+    // themselves hold no thread (server/connections.hpp).
+    int http_threads = 16;
+    std::string web_root;    // the viewer's directory (index.html, node_modules/); empty: none
+    ConnectionLimits limits; // timeouts and sizes; max_connections is also capped by the fd limit
 };
 
 // Longest request target accepted; longer ones get 414.
@@ -36,7 +42,8 @@ public:
     HttpServer& operator=(const HttpServer&) = delete;
 
     // Binds the listening socket and returns the port (the chosen one when options.port is 0).
-    // Throws IoError when the address cannot be bound.
+    // Throws InputError when the address cannot be bound (port in use, no such address, no
+    // permission), naming it and the reason.
     int bind();
     // Serves until stop(); returns after in-flight requests have finished.
     void run();
@@ -44,6 +51,11 @@ public:
     void stop();
     // True once run() accepts connections.
     bool running() const;
+
+    // Answers one complete request, given as its raw bytes (head and body, already framed by
+    // check_request_head), exactly as a connection would: routing, handlers, error mapping,
+    // the response's bytes. No socket is involved; the fuzz harness calls it directly.
+    Reply answer(std::string_view request, bool last = false);
 
 private:
     struct Impl;

@@ -73,6 +73,18 @@ std::string Metrics::render() const {
     counter("tb_store_write_failures_total",
             "Generated tiles that could not be stored.",
             store_write_failures);
+    counter("tb_http_connections_total", "TCP connections accepted.", accepted_connections);
+    counter("tb_http_connections_refused_total",
+            "Connections answered 503 and closed because too many were open.",
+            refused_connections);
+    counter("tb_http_timeouts_total",
+            "Connections closed because a request head, body or response stalled.",
+            request_timeouts);
+    out << "# HELP tb_compressions_total Documents compressed, by coding (once per ETag while "
+           "cached).\n# TYPE tb_compressions_total counter\n"
+        << "tb_compressions_total{coding=\"gzip\"} " << gzip_compressions << '\n'
+        << "tb_compressions_total{coding=\"br\"} " << brotli_compressions << '\n';
+    gauge("tb_http_connections", "Open HTTP connections.", static_cast<double>(open_connections));
     gauge("tb_http_in_flight_requests",
           "HTTP requests being handled.",
           static_cast<double>(in_flight_requests));

@@ -29,6 +29,12 @@ public:
     std::atomic<std::uint64_t> single_flight_waits{0}; // requests that joined a generation
     std::atomic<std::uint64_t> queue_rejections{0};    // 503s for a full generation queue
     std::atomic<std::uint64_t> store_write_failures{0};
+    std::atomic<std::uint64_t> accepted_connections{0};
+    std::atomic<std::uint64_t> refused_connections{0}; // over the connection limit: 503, closed
+    std::atomic<std::uint64_t> request_timeouts{0};    // 408s and stalled responses, closed
+    std::atomic<std::uint64_t> gzip_compressions{0};   // documents compressed (once per ETag)
+    std::atomic<std::uint64_t> brotli_compressions{0};
+    std::atomic<std::int64_t> open_connections{0};
     std::atomic<std::int64_t> in_flight_requests{0};
     std::atomic<std::int64_t> in_flight_generations{0}; // running make_tile calls
     std::atomic<std::int64_t> queued_generations{0};    // waiting for a pool thread

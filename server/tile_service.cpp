@@ -4,6 +4,9 @@
 #include "core/error.hpp"
 #include "tiler/log.hpp"
 
+#include <sys/resource.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <chrono>
 #include <condition_variable>
@@ -19,6 +22,12 @@
 
 namespace tb::server {
 namespace {
+
+// Nice value of the generation threads (0 is the default, 19 the lowest priority).
+constexpr int kGenerationNice = 10;
+
+// Default ceiling of TileServiceOptions::max_waiting (each waiter holds an HTTP thread).
+constexpr long long kMaxWaiting = 1024;
 
 // Bookkeeping bytes charged per cache entry on top of key and payload.
 constexpr std::size_t kEntryOverhead = 128;
@@ -82,7 +91,15 @@ class Pool {
 public:
     explicit Pool(int threads) {
         for (int i = 0; i < threads; ++i) {
-            threads_.emplace_back([this] { work(); });
+            threads_.emplace_back([this] {
+                // Generation yields the CPU to the threads that answer requests, so that health
+                // checks and cache hits stay fast while every core meshes. Linux sets the nice
+                // value per thread, and the mesher's own threads inherit it.
+                if (setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), kGenerationNice) != 0) {
+                    log::debug("cannot lower the priority of a generation thread");
+                }
+                work();
+            });
         }
     }
     ~Pool() {
@@ -159,6 +176,24 @@ void throw_if_failure(const Blob& blob) {
 
 } // namespace
 
+const std::string& Blob::encoded(Coding coding, Metrics& metrics) const {
+    if (coding == Coding::Brotli) {
+        std::call_once(brotli_once_, [&] {
+            brotli_ = compress(bytes, Coding::Brotli);
+            ++metrics.brotli_compressions;
+        });
+        return brotli_;
+    }
+    if (coding == Coding::Gzip) {
+        std::call_once(gzip_once_, [&] {
+            gzip_ = compress(bytes, Coding::Gzip);
+            ++metrics.gzip_compressions;
+        });
+        return gzip_;
+    }
+    return bytes;
+}
+
 std::string make_etag(std::string_view bytes) {
     std::uint64_t h = 14695981039346656037ull;
     for (unsigned char c : bytes) {
@@ -181,6 +216,7 @@ struct TileService::Impl {
     std::mutex flight_mutex; // guards `flights` and `pending`
     std::map<std::string, std::shared_future<std::shared_ptr<const Blob>>> flights;
     int pending = 0; // generations queued or running
+    int waiting = 0; // requests waiting for a generation
 
     Pool pool; // last: destroyed (drained and joined) first
 };
@@ -189,13 +225,22 @@ TileService::TileService(std::vector<ServedLayer> layers,
                          const TileServiceOptions& options,
                          Metrics& metrics)
     : layers_(std::move(layers)) {
-    TB_ASSERT(options.threads >= 1 && options.queue_limit >= 0);
-    impl_ = std::make_unique<Impl>(options, metrics);
+    TB_ASSERT(options.threads >= 1 && options.queue_limit >= 0 && options.max_waiting >= 0);
+    TileServiceOptions resolved = options;
+    if (resolved.max_waiting == 0) {
+        resolved.max_waiting = static_cast<int>(
+            std::min<long long>(2LL * (options.threads + options.queue_limit), kMaxWaiting));
+    }
+    impl_ = std::make_unique<Impl>(resolved, metrics);
     TB_ASSERT(std::all_of(
         layers_.begin(), layers_.end(), [](const ServedLayer& l) { return l.layer != nullptr; }));
 }
 
 TileService::~TileService() = default;
+
+int TileService::max_waiting() const {
+    return impl_->options.max_waiting;
+}
 
 const ServedLayer* TileService::find(const std::string& name) const {
     for (const auto& l : layers_) {
@@ -250,10 +295,17 @@ std::shared_ptr<const Blob> TileService::tile(const std::string& layer_name,
         ++s.metrics.cache_misses;
         std::shared_future<std::shared_ptr<const Blob>> flight;
         std::shared_ptr<std::promise<std::shared_ptr<const Blob>>> promise;
+        bool entered_wait = false; // counted in s.waiting
         {
             std::lock_guard<std::mutex> lock(s.flight_mutex);
             const auto it = s.flights.find(key);
             if (it != s.flights.end()) {
+                if (s.waiting >= s.options.max_waiting) {
+                    ++s.metrics.queue_rejections;
+                    return nullptr;
+                }
+                ++s.waiting;
+                entered_wait = true;
                 flight = it->second;
                 ++s.metrics.single_flight_waits;
             } else {
@@ -287,8 +339,11 @@ std::shared_ptr<const Blob> TileService::tile(const std::string& layer_name,
                 bool admitted = false;
                 {
                     std::lock_guard<std::mutex> lock(s.flight_mutex);
-                    if (s.pending < s.options.threads + s.options.queue_limit) {
+                    if (s.pending < s.options.threads + s.options.queue_limit &&
+                        s.waiting < s.options.max_waiting) {
                         ++s.pending;
+                        ++s.waiting;
+                        entered_wait = true;
                         admitted = true;
                     } else {
                         // Followers of this flight get the same answer: busy.
@@ -346,6 +401,18 @@ std::shared_ptr<const Blob> TileService::tile(const std::string& layer_name,
                 });
             }
         }
+        // Leaves the count of waiting requests however get() returns. A lead that found its tile
+        // in the store never entered it.
+        struct Leave {
+            Impl& s;
+            bool entered;
+            ~Leave() {
+                if (entered) {
+                    std::lock_guard<std::mutex> lock(s.flight_mutex);
+                    --s.waiting;
+                }
+            }
+        } leave{s, entered_wait};
         blob = flight.get(); // rethrows the generation's InputError / IoError
         if (!blob) {
             ++s.metrics.queue_rejections;

@@ -6,6 +6,7 @@
 // wait for one make_tile call. A generated tile is written to the store (atomically, by
 // TileStore::put) and inserted in the LRU. Tiles with no data are remembered in the LRU too, so
 // repeated requests outside the data stay cheap.
+#include "server/encoding.hpp"
 #include "server/metrics.hpp"
 #include "tiler/formats/format.hpp"
 #include "tiler/layer.hpp"
@@ -13,6 +14,7 @@
 
 #include <cstddef>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -28,6 +30,10 @@ struct TileServiceOptions {
     std::size_t cache_bytes = std::size_t{256} << 20;
     int threads = 1;      // generation threads, >= 1
     int queue_limit = 64; // generations allowed to wait for a thread, >= 0
+    // Requests allowed to wait for a generation at once (their own or another request's for the
+    // same tile); past it they get 503 at once. 0: 2 x (threads + queue_limit), at most 1024.
+    // Each waiting request holds an HTTP worker thread, so the server sizes its pool with it.
+    int max_waiting = 0;
 };
 
 // An immutable response payload with its strong validator, or a remembered failure.
@@ -38,6 +44,15 @@ struct Blob {
     // there, no such document) or 400 (the layer refused the request, e.g. an eps too fine for
     // the tile); tile() and document() rethrow it as NotFound / InputError.
     int failure = 0;
+
+    // The payload in `coding` (gzip or br), compressed on first use and kept with the blob: a
+    // cached document is compressed once per ETag. Thread-safe; counts compressions in
+    // `metrics`.
+    const std::string& encoded(Coding coding, Metrics& metrics) const;
+
+private:
+    mutable std::once_flag gzip_once_, brotli_once_;
+    mutable std::string gzip_, brotli_;
 };
 
 // Strong ETag of `bytes`: a 64-bit FNV-1a hash and the length, quoted.
@@ -54,8 +69,11 @@ public:
 
     const std::vector<ServedLayer>& layers() const { return layers_; }
     const ServedLayer* find(const std::string& name) const; // nullptr when unknown
+    // Requests that may wait for generations at once (TileServiceOptions::max_waiting, resolved).
+    int max_waiting() const;
 
-    // The encoded tile, or nullptr when the generation queue is full (answer 503). Throws
+    // The encoded tile, or nullptr when the generation queue or the requests waiting for
+    // generations are at their limit (answer 503; decided at once, without waiting). Throws
     // NotFound for an unknown layer, a format the layer does not serve, or a tile with no data;
     // InputError for an id outside the scheme or an eps level the layer does not have.
     std::shared_ptr<const Blob> tile(const std::string& layer,
