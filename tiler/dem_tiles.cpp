@@ -78,8 +78,18 @@ std::vector<double> dem_tile_heights(const Layer& layer, const TileId& id) {
     const int lattice = 2 * p;
     const std::int64_t c0 = id.x * lattice + 1 - 2 * m;
     const std::int64_t r0 = id.y * lattice + 1 - 2 * m;
-    const LatticeBlock block =
-        layer.source().sample(Scheme::Mercator, id.z, lattice, c0, r0, 2 * w - 1, 2 * w - 1);
+    // One lattice row per pixel row: the even rows between them are never read.
+    std::vector<double> raw(static_cast<std::size_t>(w) * w);
+    std::vector<std::uint8_t> measured(raw.size());
+    for (int j = 0; j < w; ++j) {
+        const LatticeBlock row =
+            layer.source().sample(Scheme::Mercator, id.z, lattice, c0, r0 + 2 * j, 2 * w - 1, 1);
+        for (int i = 0; i < w; ++i) {
+            raw[static_cast<std::size_t>(j) * w + i] = row.heights[static_cast<std::size_t>(2 * i)];
+            measured[static_cast<std::size_t>(j) * w + i] =
+                row.valid[static_cast<std::size_t>(2 * i)];
+        }
+    }
 
     const bool to_ellipsoid = o.dem_heights == DemHeights::Ellipsoid;
     const bool source_ellipsoidal = layer.source_datum() == VerticalDatum::Ellipsoid;
@@ -92,14 +102,13 @@ std::vector<double> dem_tile_heights(const Layer& layer, const TileId& id) {
         const double y = lattice_y(Scheme::Mercator, id.z, lattice, r0 + 2 * j);
         for (int i = 0; i < w; ++i) {
             const std::size_t k = static_cast<std::size_t>(j) * w + i;
-            const std::size_t b = static_cast<std::size_t>(2 * j) * (2 * w - 1) + 2 * i;
             if (!undulation.empty()) {
                 const LonLat q = native_to_lonlat(
                     Scheme::Mercator, lattice_x(Scheme::Mercator, id.z, lattice, c0 + 2 * i), y);
                 undulation[k] = egm96_undulation(q.lon, q.lat);
             }
-            heights[k] = block.heights[b];
-            valid[k] = block.valid[b];
+            heights[k] = raw[k];
+            valid[k] = measured[k];
             all_valid = all_valid && valid[k];
             // Fill in heights above sea level, so data-free areas lie at sea level.
             if (valid[k] && source_ellipsoidal) {
@@ -118,8 +127,7 @@ std::vector<double> dem_tile_heights(const Layer& layer, const TileId& id) {
             if (to_ellipsoid) {
                 h += undulation[k];
                 if (source_ellipsoidal && valid[k]) {
-                    h = block.heights[static_cast<std::size_t>(2 * (j + m)) * (2 * w - 1) +
-                                      2 * (i + m)]; // the source's own height, untouched
+                    h = raw[k]; // the source's own height, untouched
                 }
             }
             out[static_cast<std::size_t>(j) * p + i] = h;
