@@ -7,6 +7,7 @@
 #include "tiler/sources/gdal_source.hpp"
 #include "tiler/sources/geoid.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 namespace tb::tiler {
@@ -79,41 +80,41 @@ std::vector<double> dem_tile_heights(const Layer& layer, const TileId& id) {
     const std::int64_t c0 = id.x * lattice + 1 - 2 * m;
     const std::int64_t r0 = id.y * lattice + 1 - 2 * m;
     // One lattice row per pixel row: the even rows between them are never read.
-    std::vector<double> raw(static_cast<std::size_t>(w) * w);
-    std::vector<std::uint8_t> measured(raw.size());
+    std::vector<double> heights(static_cast<std::size_t>(w) * w);
+    std::vector<std::uint8_t> valid(heights.size());
     for (int j = 0; j < w; ++j) {
         const LatticeBlock row =
             layer.source().sample(Scheme::Mercator, id.z, lattice, c0, r0 + 2 * j, 2 * w - 1, 1);
         for (int i = 0; i < w; ++i) {
-            raw[static_cast<std::size_t>(j) * w + i] = row.heights[static_cast<std::size_t>(2 * i)];
-            measured[static_cast<std::size_t>(j) * w + i] =
-                row.valid[static_cast<std::size_t>(2 * i)];
+            heights[static_cast<std::size_t>(j) * w + i] =
+                row.heights[static_cast<std::size_t>(2 * i)];
+            valid[static_cast<std::size_t>(j) * w + i] = row.valid[static_cast<std::size_t>(2 * i)];
         }
     }
+    const bool all_valid =
+        std::all_of(valid.begin(), valid.end(), [](std::uint8_t v) { return v != 0; });
 
     const bool to_ellipsoid = o.dem_heights == DemHeights::Ellipsoid;
     const bool source_ellipsoidal = layer.source_datum() == VerticalDatum::Ellipsoid;
-    const bool need_geoid = to_ellipsoid != source_ellipsoidal;
-    std::vector<double> heights(static_cast<std::size_t>(w) * w);
-    std::vector<std::uint8_t> valid(heights.size());
-    std::vector<double> undulation(need_geoid || to_ellipsoid ? heights.size() : 0);
-    bool all_valid = true;
-    for (int j = 0; j < w; ++j) {
-        const double y = lattice_y(Scheme::Mercator, id.z, lattice, r0 + 2 * j);
-        for (int i = 0; i < w; ++i) {
-            const std::size_t k = static_cast<std::size_t>(j) * w + i;
-            if (!undulation.empty()) {
-                const LonLat q = native_to_lonlat(
-                    Scheme::Mercator, lattice_x(Scheme::Mercator, id.z, lattice, c0 + 2 * i), y);
-                undulation[k] = egm96_undulation(q.lon, q.lat);
+    std::vector<double> undulation;
+    if (to_ellipsoid || source_ellipsoidal) {
+        undulation.resize(heights.size());
+        for (int j = 0; j < w; ++j) {
+            const double y = lattice_y(Scheme::Mercator, id.z, lattice, r0 + 2 * j);
+            for (int i = 0; i < w; ++i) {
+                const double x = lattice_x(Scheme::Mercator, id.z, lattice, c0 + 2 * i);
+                const LonLat q = native_to_lonlat(Scheme::Mercator, x, y);
+                undulation[static_cast<std::size_t>(j) * w + i] = egm96_undulation(q.lon, q.lat);
             }
-            heights[k] = raw[k];
-            valid[k] = measured[k];
-            all_valid = all_valid && valid[k];
-            // Fill in heights above sea level, so data-free areas lie at sea level.
-            if (valid[k] && source_ellipsoidal) {
-                heights[k] -= undulation[k];
-            }
+        }
+    }
+    // An ellipsoidal source served in ellipsoidal heights keeps its own measured heights.
+    const std::vector<double> measured =
+        source_ellipsoidal && to_ellipsoid ? heights : std::vector<double>();
+    // Voids are filled in heights above sea level, so data-free areas lie at sea level.
+    if (source_ellipsoidal) {
+        for (std::size_t k = 0; k < heights.size(); ++k) {
+            heights[k] -= valid[k] ? undulation[k] : 0.0;
         }
     }
     if (!all_valid) {
@@ -123,12 +124,9 @@ std::vector<double> dem_tile_heights(const Layer& layer, const TileId& id) {
     for (int j = 0; j < p; ++j) {
         for (int i = 0; i < p; ++i) {
             const std::size_t k = static_cast<std::size_t>(j + m) * w + (i + m);
-            double h = heights[k];
-            if (to_ellipsoid) {
-                h += undulation[k];
-                if (source_ellipsoidal && valid[k]) {
-                    h = raw[k]; // the source's own height, untouched
-                }
+            double h = to_ellipsoid ? heights[k] + undulation[k] : heights[k];
+            if (!measured.empty() && valid[k]) {
+                h = measured[k];
             }
             out[static_cast<std::size_t>(j) * p + i] = h;
         }

@@ -341,6 +341,38 @@ TEST_CASE("DEM tiles in ellipsoidal heights are the sea-level ones plus the EGM9
     CHECK(b[0] - a[0] < 45);
 }
 
+TEST_CASE("an ellipsoidal source loses the undulation at sea level and keeps its heights as is") {
+    ScratchDir dir;
+    const std::string path = write_test_dem(dir);
+    const auto egm96 = open_dem_layer(path, DemHeights::SeaLevel);
+    LayerOptions o = egm96->options();
+    o.datum = VerticalDatum::Ellipsoid; // the same numbers, taken as ellipsoidal heights
+    const auto sea = Layer::open(o);
+    o.dem_heights = DemHeights::Ellipsoid;
+    const auto ellipsoid = Layer::open(o);
+    const int z = dem_tile_plan(*egm96).max_zoom;
+    const TileRange r = dem_tiles_at(*egm96, z);
+    const TileId id{z, r.x1, r.y1};
+    const auto source = dem_tile_heights(*egm96, id); // the source's own numbers
+    const auto a = dem_tile_heights(*sea, id);
+    const auto b = dem_tile_heights(*ellipsoid, id);
+    const Reference ref(path);
+    std::size_t measured = 0;
+    for (int j = 0; j < 512; ++j) {
+        for (int i = 0; i < 512; ++i) {
+            const LonLat c = pixel_centre(id, 512, i, j);
+            const std::size_t k = static_cast<std::size_t>(j) * 512 + i;
+            if (!ref.at(c.lon, c.lat)) {
+                continue; // filled: no source height to keep
+            }
+            ++measured;
+            REQUIRE(b[k] == source[k]);
+            REQUIRE(std::abs(a[k] - (source[k] - egm96_undulation(c.lon, c.lat))) < 1e-6);
+        }
+    }
+    CHECK(measured > 10000u);
+}
+
 TEST_CASE("DEM tiles outside EPSG:3857, the zooms or the data are refused with the right error") {
     ScratchDir dir;
     const auto layer = open_dem_layer(write_test_dem(dir));
