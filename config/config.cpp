@@ -267,7 +267,9 @@ void parse_layer(Checker& check,
                       "eps_levels",
                       "datum",
                       "formats",
-                      "store"});
+                      "store",
+                      "dem_tile_size",
+                      "dem_heights"});
     tiler::LayerOptions& o = out.options;
 
     if (!value.contains("name")) {
@@ -364,12 +366,14 @@ void parse_layer(Checker& check,
         const json& formats = value["formats"];
         out.formats.clear();
         if (formats.empty()) {
-            check.error(at + "/formats", "expected at least one of \"glb\", \"drc\", got []");
+            check.error(at + "/formats",
+                        "expected at least one of \"glb\", \"drc\", \"terrarium\", "
+                        "\"mapbox\", got []");
         }
         for (std::size_t i = 0; i < formats.size(); ++i) {
             const std::string pi = at + "/formats/" + std::to_string(i);
-            if (auto s = check.one_of(formats[i], pi, {"glb", "drc"})) {
-                const tiler::Format f = *s == "glb" ? tiler::Format::Glb : tiler::Format::Drc;
+            if (auto s = check.one_of(formats[i], pi, {"glb", "drc", "terrarium", "mapbox"})) {
+                const tiler::Format f = *tiler::parse_format(*s);
                 bool seen = false;
                 for (auto g : out.formats) {
                     seen = seen || g == f;
@@ -380,6 +384,23 @@ void parse_layer(Checker& check,
                     out.formats.push_back(f);
                 }
             }
+        }
+    }
+    if (value.contains("dem_tile_size")) {
+        const std::string p = at + "/dem_tile_size";
+        if (auto v = check.integer(value["dem_tile_size"], p, 256, 512)) {
+            if (*v != 256 && *v != 512) {
+                check.error(p, "expected 256 or 512, got " + show(value["dem_tile_size"]));
+            } else {
+                o.dem_tile_size = static_cast<int>(*v);
+            }
+        }
+    }
+    if (value.contains("dem_heights")) {
+        if (auto s = check.one_of(
+                value["dem_heights"], at + "/dem_heights", {"sea_level", "ellipsoid"})) {
+            o.dem_heights =
+                *s == "ellipsoid" ? tiler::DemHeights::Ellipsoid : tiler::DemHeights::SeaLevel;
         }
     }
     if (value.contains("store") && !value["store"].is_null()) {

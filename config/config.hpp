@@ -27,7 +27,8 @@ struct ServerConfig {
 
 struct LayerConfig {
     tiler::LayerOptions options; // sources already resolved against the config's dir
-    std::vector<tiler::Format> formats = {tiler::Format::Glb, tiler::Format::Drc};
+    std::vector<tiler::Format> formats = {
+        tiler::Format::Glb, tiler::Format::Drc, tiler::Format::Terrarium, tiler::Format::Mapbox};
     std::optional<std::string> store; // directory or *.sqlite / *.db; none: memory only
 };
 

@@ -3,6 +3,7 @@
 #include "core/error.hpp"
 #include "server/commands.hpp"
 #include "tiler/build/build.hpp"
+#include "tiler/dem_tiles.hpp"
 #include "tiler/log.hpp"
 
 #include <atomic>
@@ -56,7 +57,7 @@ std::vector<tiler::Format> parse_formats(const std::string& text) {
         const auto f = tiler::parse_format(name);
         if (!f) {
             throw InputError("build: --formats: unknown format '" + name +
-                             "'; expected a comma-separated list of glb, drc");
+                             "'; expected a comma-separated list of glb, drc, terrarium, mapbox");
         }
         formats.push_back(*f);
     }
@@ -129,6 +130,16 @@ int run(const Args& args) {
     if (auto v = args.get("formats")) {
         o.formats = parse_formats(*v);
     }
+    if (args.has("dem-size")) {
+        const long long n = args.get_int("dem-size", 0);
+        if (n != 256 && n != 512) {
+            throw InputError("build: --dem-size " + std::to_string(n) + ": expected 256 or 512");
+        }
+        o.layer.dem_tile_size = static_cast<int>(n);
+    }
+    if (auto v = args.get("dem-heights")) {
+        o.layer.dem_heights = tiler::parse_dem_heights(*v);
+    }
     if (args.has("threads")) {
         const long long n = args.get_int("threads", 0);
         if (n < 1 || n > 1024) {
@@ -156,10 +167,12 @@ int run(const Args& args) {
     char seconds[32];
     std::snprintf(seconds, sizeof seconds, "%.1f", s.seconds);
 
-    log::info("build: " + std::to_string(s.written) + " tiles written, " +
-              std::to_string(s.skipped) + " skipped (already there), " + std::to_string(s.empty) +
-              " empty, " + std::to_string(s.failed) + " failed, " + human_bytes(s.bytes) + ", " +
-              seconds + " s" + (s.tileset_written ? "; tileset written" : ""));
+    log::info(
+        "build: " + std::to_string(s.written) + " tiles written" +
+        (s.dem_written ? " (" + std::to_string(s.dem_written) + " of them DEM tiles), " : ", ") +
+        std::to_string(s.skipped) + " skipped (already there), " + std::to_string(s.empty) +
+        " empty, " + std::to_string(s.failed) + " failed, " + human_bytes(s.bytes) + ", " +
+        seconds + " s" + (s.tileset_written ? "; tileset written" : ""));
     if (args.has("json")) {
         std::printf("%s\n", tiler::to_json(s).c_str());
         std::fflush(stdout);
@@ -194,7 +207,12 @@ const Command& build_command() {
              {"max-zoom", "Z", "finest zoom (default: from the sources' resolution)"},
              {"eps-finest", "E", "vertical error bound at max zoom, metres; doubles per level up"},
              {"bbox", "W,S,E,N", "only tiles meeting this box, degrees (no tileset is written)"},
-             {"formats", "LIST", "comma-separated: glb, drc (default glb)"},
+             {"formats",
+              "LIST",
+              "comma-separated: glb, drc, terrarium, mapbox (default glb); terrarium and "
+              "mapbox are PNG DEM tiles (EPSG:3857 XYZ) under OUT/{layer}/dem/"},
+             {"dem-size", "P", "DEM tiles are P x P pixels, 256 or 512 (default 512)"},
+             {"dem-heights", "H", "DEM tile heights: sea_level (default) or ellipsoid"},
              {"threads", "N", "worker threads (default: one per core)"},
              {"resume", "", "continue a build: same parameters, tiles already there are kept"},
              {"force", "", "delete the layer's existing tiles and documents first"},

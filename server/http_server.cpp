@@ -3,6 +3,7 @@
 #include "server/http_server.hpp"
 
 #include "core/error.hpp"
+#include "tiler/dem_tiles.hpp"
 #include "tiler/log.hpp"
 #include "tiler/tile_grid.hpp"
 
@@ -14,6 +15,8 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <charconv>
 #include <chrono>
@@ -270,6 +273,37 @@ void send_blob(const httplib::Request& req,
     }
     res.set_content(blob.encoded(coding, *metrics), media_type);
     res.set_header("Content-Encoding", coding_name(coding));
+}
+
+// The DEM tile encoding a request asks for with ?encoding= (terrarium when absent).
+tiler::Format dem_encoding(const httplib::Request& req) {
+    if (!req.has_param("encoding")) {
+        return tiler::Format::Terrarium;
+    }
+    const std::string e = req.get_param_value("encoding");
+    if (e == "terrarium") {
+        return tiler::Format::Terrarium;
+    }
+    if (e == "mapbox") {
+        return tiler::Format::Mapbox;
+    }
+    throw InputError("encoding '" + e.substr(0, 40) + "' is unknown; use terrarium or mapbox");
+}
+
+// The scheme and authority clients reach this server by, for the absolute URLs of TileJSON:
+// the request's Host (and X-Forwarded-Proto behind a TLS proxy), else the listening address.
+std::string public_origin(const httplib::Request& req, const std::string& host, int port) {
+    std::string authority = req.get_header_value("Host");
+    const bool plain = !authority.empty() && authority.size() <= 255 &&
+                       std::all_of(authority.begin(), authority.end(), [](char c) {
+                           return std::isalnum(static_cast<unsigned char>(c)) || c == '.' ||
+                                  c == '-' || c == ':' || c == '[' || c == ']' || c == '_';
+                       });
+    if (!plain) {
+        authority = host + ":" + std::to_string(port);
+    }
+    const bool https = req.get_header_value("X-Forwarded-Proto") == "https";
+    return (https ? "https://" : "http://") + authority;
 }
 
 const char* status_text(int status) {
@@ -666,15 +700,70 @@ struct HttpServer::Impl {
             }
             out << "],\"formats\":[";
             for (std::size_t i = 0; i < served.formats.size(); ++i) {
-                out << (i ? "," : "") << "\"" << tiler::extension(served.formats[i]) << "\"";
+                out << (i ? "," : "") << "\"" << tiler::format_name(served.formats[i]) << "\"";
             }
             out << "],\"stored\":" << (served.store ? "true" : "false") << ",\"tileset\":\"/"
-                << o.name << "/tileset.json\",\"tiles\":\"/" << o.name
-                << "/{z}/{x}/{y}.{format}\"}";
+                << o.name << "/tileset.json\",\"tiles\":\"/" << o.name << "/{z}/{x}/{y}.{format}\"";
+            out << dem_json(served) << "}";
             first = false;
         }
         out << "]}\n";
         return out.str();
+    }
+
+    // ",\"dem\":{...}" for a layer serving raster DEM tiles, else "".
+    static std::string dem_json(const ServedLayer& served) {
+        std::string encodings;
+        for (auto f : served.formats) {
+            if (tiler::is_dem_format(f)) {
+                encodings +=
+                    std::string(encodings.empty() ? "" : ",") + "\"" + tiler::format_name(f) + "\"";
+            }
+        }
+        if (encodings.empty()) {
+            return "";
+        }
+        const auto& o = served.layer->options();
+        const tiler::DemTilePlan plan = tiler::dem_tile_plan(*served.layer);
+        return ",\"dem\":{\"tilejson\":\"/" + o.name + "/dem/tilejson.json\",\"tiles\":\"/" +
+               o.name + "/dem/{z}/{x}/{y}.png\",\"encodings\":[" + encodings +
+               "],\"tile_size\":" + std::to_string(plan.tile_size) +
+               ",\"min_zoom\":" + std::to_string(plan.min_zoom) +
+               ",\"max_zoom\":" + std::to_string(plan.max_zoom) + ",\"heights\":\"" +
+               tiler::to_string(o.dem_heights) + "\"}";
+    }
+
+    // TileJSON 3.0.0 of a layer's raster DEM tiles in one encoding, as MapLibre's raster-dem
+    // source reads it (with its `encoding` and `tileSize`).
+    std::string
+    tilejson(const ServedLayer& served, tiler::Format encoding, const std::string& origin) const {
+        const auto& o = served.layer->options();
+        const tiler::DemTilePlan plan = tiler::dem_tile_plan(*served.layer);
+        const auto& b = plan.bounds;
+        std::ostringstream out;
+        out << "{\"tilejson\":\"3.0.0\",\"name\":\"" << json_escape(o.name)
+            << "\",\"scheme\":\"xyz\",\"tiles\":[\"" << json_escape(origin) << "/" << o.name
+            << "/dem/{z}/{x}/{y}.png?encoding=" << tiler::format_name(encoding)
+            << "\"],\"minzoom\":" << plan.min_zoom << ",\"maxzoom\":" << plan.max_zoom
+            << ",\"bounds\":[" << number(b.west) << "," << number(b.south) << "," << number(b.east)
+            << "," << number(b.north) << "],\"center\":[" << number(0.5 * (b.west + b.east)) << ","
+            << number(0.5 * (b.south + b.north)) << "," << plan.max_zoom << "],\"encoding\":\""
+            << tiler::format_name(encoding) << "\",\"tileSize\":" << plan.tile_size << "}\n";
+        return out.str();
+    }
+
+    // The layer, which must serve `format` (NotFound otherwise).
+    const ServedLayer& serving(const std::string& name, tiler::Format format) const {
+        const ServedLayer* served = tiles.find(name);
+        if (!served) {
+            throw NotFound("unknown layer '" + name + "'");
+        }
+        if (std::find(served->formats.begin(), served->formats.end(), format) ==
+            served->formats.end()) {
+            throw NotFound("layer '" + name + "' does not serve " + tiler::format_name(format) +
+                           " DEM tiles");
+        }
+        return *served;
     }
 
     std::string landing_html() const {
@@ -693,10 +782,14 @@ struct HttpServer::Impl {
             const auto range = layer.tiles_at(z);
             out << "<tr><td>" << name << "</td><td>" << layer.min_zoom() << ".." << layer.max_zoom()
                 << "</td><td><a href=\"/" << name << "/tileset.json\">tileset.json</a></td><td>";
-            if (!range.empty() && !served.formats.empty()) {
+            const auto mesh =
+                std::find_if(served.formats.begin(), served.formats.end(), [](tiler::Format f) {
+                    return !tiler::is_dem_format(f);
+                });
+            if (!range.empty() && mesh != served.formats.end()) {
                 const std::string tile = "/" + name + "/" + std::to_string(z) + "/" +
                                          std::to_string(range.x0) + "/" + std::to_string(range.y0) +
-                                         "." + tiler::extension(served.formats.front());
+                                         "." + tiler::extension(*mesh);
                 out << "<a href=\"" << tile << "\">" << tile << "</a>";
             }
             out << "</td></tr>\n";
@@ -833,6 +926,26 @@ struct HttpServer::Impl {
             send_blob(req, res, *layers_blob, "application/json", kDocumentCacheControl, &metrics);
         });
 
+        // Raster DEM tiles and their TileJSON (EPSG:3857 XYZ, whatever the layer's scheme).
+        server.Get(R"(/+([^/]+)/+dem/+([^/]*)/+([^/]*)/+([^/]*)\.png)",
+                   [this](const httplib::Request& req, httplib::Response& res) {
+                       t_request.route = "dem_tile";
+                       serve_dem_tile(req, res);
+                   });
+
+        server.Get(R"(/+([^/]+)/+dem/+tilejson\.json)",
+                   [this](const httplib::Request& req, httplib::Response& res) {
+                       t_request.route = "tilejson";
+                       const tiler::Format encoding = dem_encoding(req);
+                       const ServedLayer& served = serving(req.matches[1].str(), encoding);
+                       Blob blob;
+                       blob.bytes =
+                           tilejson(served, encoding, public_origin(req, options.host, port));
+                       blob.etag = make_etag(blob.bytes);
+                       send_blob(req, res, blob, "application/json", kDocumentCacheControl);
+                       res.set_header("Vary", "Accept-Encoding");
+                   });
+
         // Repeated slashes are tolerated ("/dem//8/1/2.glb"): some clients join a base URL that
         // ends in '/' with another '/' (FORMATS.md, 3d-tiles-renderer).
         server.Get(R"(/+([^/]+)/+([^/]*)/+([^/]*)/+([^/]*)\.(glb|drc))",
@@ -860,6 +973,25 @@ struct HttpServer::Impl {
                                  kDocumentCacheControl,
                                  json ? &metrics : nullptr);
                    });
+    }
+
+    void serve_dem_tile(const httplib::Request& req, httplib::Response& res) {
+        std::int64_t z = 0, x = 0, y = 0;
+        if (!parse_index(req.matches[2].str(), 2, z) || !parse_index(req.matches[3].str(), 10, x) ||
+            !parse_index(req.matches[4].str(), 10, y) || z > tiler::kMaxZoom) {
+            throw InputError("DEM tile coordinates must be /dem/{z}/{x}/{y}.png with "
+                             "non-negative integers (z up to " +
+                             std::to_string(tiler::kMaxZoom) + ")");
+        }
+        const tiler::Format encoding = dem_encoding(req);
+        const auto blob = tiles.tile(
+            req.matches[1].str(), tiler::TileId{static_cast<int>(z), x, y}, encoding, {});
+        if (!blob) {
+            res.set_header("Retry-After", std::to_string(kRetryAfterSeconds));
+            send_error(res, 503, "the server is busy generating tiles; retry shortly");
+            return;
+        }
+        send_blob(req, res, *blob, tiler::media_type(encoding), kTileCacheControl);
     }
 
     void serve_tile(const httplib::Request& req, httplib::Response& res) {

@@ -2,6 +2,7 @@
 #include "server/tile_service.hpp"
 
 #include "core/error.hpp"
+#include "tiler/dem_tiles.hpp"
 #include "tiler/log.hpp"
 
 #include <sys/resource.h>
@@ -146,7 +147,7 @@ private:
 
 std::string
 tile_key(const std::string& layer, const tiler::TileId& id, tiler::Format format, int eps_level) {
-    return "t/" + layer + "/" + tiler::extension(format) + "/" + std::to_string(eps_level) + "/" +
+    return "t/" + layer + "/" + tiler::format_name(format) + "/" + std::to_string(eps_level) + "/" +
            std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
 }
 
@@ -251,6 +252,50 @@ const ServedLayer* TileService::find(const std::string& name) const {
     return nullptr;
 }
 
+namespace {
+
+// The checks before a mesh tile is looked up: InputError for an unknown eps level or an id
+// outside the layer's scheme, NotFound outside its zooms or data.
+void check_mesh_tile(const tiler::Layer& layer, const tiler::TileId& id, tiler::EpsChoice eps) {
+    const int n_levels = static_cast<int>(layer.options().eps_levels.size());
+    if (eps.level < -1 || eps.level >= n_levels) {
+        throw InputError("eps level " + std::to_string(eps.level) + " is not configured; layer '" +
+                         layer.options().name + "' has " + std::to_string(n_levels) +
+                         " eps level(s)");
+    }
+    if (!tiler::is_valid(layer.options().scheme, id)) {
+        throw InputError("tile " + std::to_string(id.z) + "/" + std::to_string(id.x) + "/" +
+                         std::to_string(id.y) + " is outside the " +
+                         tiler::to_string(layer.options().scheme) + " tiling scheme");
+    }
+    const std::string where =
+        std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
+    if (id.z < layer.min_zoom() || id.z > layer.max_zoom() || !layer.may_have_tile(id)) {
+        throw NotFound("layer '" + layer.options().name + "' has no tile " + where + " (zooms " +
+                       std::to_string(layer.min_zoom()) + ".." + std::to_string(layer.max_zoom()) +
+                       ")");
+    }
+}
+
+// The same for a raster DEM tile, whose pyramid is EPSG:3857 XYZ whatever the layer's scheme.
+void check_dem_tile(const tiler::Layer& layer, const tiler::TileId& id) {
+    const std::string where =
+        std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
+    if (!tiler::is_valid(tiler::Scheme::Mercator, id)) {
+        throw InputError("DEM tile " + where +
+                         " is outside EPSG:3857 XYZ (x and y below 2^z at zoom z)");
+    }
+    const tiler::TileRange r = tiler::dem_tiles_at(layer, id.z);
+    if (r.empty() || id.x < r.x0 || id.x > r.x1 || id.y < r.y0 || id.y > r.y1) {
+        const tiler::DemTilePlan plan = tiler::dem_tile_plan(layer);
+        throw NotFound("layer '" + layer.options().name + "' has no DEM tile " + where +
+                       " (DEM zooms " + std::to_string(plan.min_zoom) + ".." +
+                       std::to_string(plan.max_zoom) + ")");
+    }
+}
+
+} // namespace
+
 std::shared_ptr<const Blob> TileService::tile(const std::string& layer_name,
                                               const tiler::TileId& id,
                                               tiler::Format format,
@@ -268,22 +313,11 @@ std::shared_ptr<const Blob> TileService::tile(const std::string& layer_name,
         throw NotFound("layer '" + layer_name + "' does not serve ." + tiler::extension(format) +
                        " tiles");
     }
-    const int n_levels = static_cast<int>(layer.options().eps_levels.size());
-    if (eps.level < -1 || eps.level >= n_levels) {
-        throw InputError("eps level " + std::to_string(eps.level) + " is not configured; layer '" +
-                         layer_name + "' has " + std::to_string(n_levels) + " eps level(s)");
-    }
-    if (!tiler::is_valid(layer.options().scheme, id)) {
-        throw InputError("tile " + std::to_string(id.z) + "/" + std::to_string(id.x) + "/" +
-                         std::to_string(id.y) + " is outside the " +
-                         tiler::to_string(layer.options().scheme) + " tiling scheme");
-    }
-    const std::string where =
-        std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
-    if (id.z < layer.min_zoom() || id.z > layer.max_zoom() || !layer.may_have_tile(id)) {
-        throw NotFound("layer '" + layer_name + "' has no tile " + where + " (zooms " +
-                       std::to_string(layer.min_zoom()) + ".." + std::to_string(layer.max_zoom()) +
-                       ")");
+    if (tiler::is_dem_format(format)) {
+        TB_ASSERT(eps.level == -1); // DEM tiles have no eps
+        check_dem_tile(layer, id);
+    } else {
+        check_mesh_tile(layer, id, eps);
     }
 
     Impl& s = *impl_;
@@ -363,7 +397,9 @@ std::shared_ptr<const Blob> TileService::tile(const std::string& layer_name,
                     std::shared_ptr<const Blob> made;
                     std::exception_ptr failure;
                     try {
-                        made = make_blob(layer.make_tile(id, format, eps));
+                        made = make_blob(tiler::is_dem_format(format)
+                                             ? tiler::make_dem_tile(layer, id, format)
+                                             : layer.make_tile(id, format, eps));
                         ++s.metrics.tiles_generated;
                     } catch (const NotFound& e) {
                         made = make_failure(404, e.what());

@@ -26,6 +26,13 @@ enum class VerticalDatum {
     Ellipsoid, // source heights are already WGS84 ellipsoidal
 };
 
+// The heights of the layer's raster DEM tiles (tiler/dem_tiles.hpp).
+enum class DemHeights {
+    SeaLevel,  // above sea level (EGM96), as web maps expect: the source's own heights for an
+               // EGM96 source (no geoid applied); an ellipsoidal source has the geoid removed
+    Ellipsoid, // above the WGS84 ellipsoid, as the mesh tiles
+};
+
 struct LayerOptions {
     std::string name = "terrain";     // URL-safe: [A-Za-z0-9_-]+
     std::vector<std::string> sources; // DEM paths or GDAL names (VRT, /vsicurl/, ...)
@@ -35,6 +42,8 @@ struct LayerOptions {
     std::optional<double> finest_eps;      // metres at max_zoom; eps doubles per level up
     std::vector<double> eps_levels;        // extra eps (metres) selectable per request
     VerticalDatum datum = VerticalDatum::Auto;
+    int dem_tile_size = 512; // raster DEM tiles: pixels per side, 256 or 512
+    DemHeights dem_heights = DemHeights::SeaLevel;
 };
 
 // How a layer makes its published error true at every valid pixel of the source.

@@ -65,7 +65,12 @@ TEST_CASE("a minimal config gets the documented defaults and resolves sources ag
     CHECK(layer.options.tile_size == 256);
     CHECK(!layer.options.min_zoom);
     CHECK(!layer.options.finest_eps);
-    CHECK(layer.formats.size() == 2);
+    CHECK(layer.formats == std::vector<tb::tiler::Format>{tb::tiler::Format::Glb,
+                                                          tb::tiler::Format::Drc,
+                                                          tb::tiler::Format::Terrarium,
+                                                          tb::tiler::Format::Mapbox});
+    CHECK(layer.options.dem_tile_size == 512);
+    CHECK(layer.options.dem_heights == tb::tiler::DemHeights::SeaLevel);
     CHECK(!layer.store);
 }
 
@@ -80,7 +85,8 @@ TEST_CASE("a full config fills every field") {
       "layers": [{"name": "a-1", "sources": ["a.tif", "/vsicurl/https://x/y.tif"],
                   "scheme": "mercator", "tile_size": 128, "min_zoom": 3, "max_zoom": 9,
                   "finest_eps": 0.5, "eps_levels": [1, 2.5], "datum": "ellipsoid",
-                  "formats": ["drc"], "store": "out/tiles.sqlite"}]})",
+                  "formats": ["drc", "mapbox"], "store": "out/tiles.sqlite",
+                  "dem_tile_size": 256, "dem_heights": "ellipsoid"}]})",
                                               dir / "c.json");
     CHECK(cfg.server.host == "0.0.0.0");
     CHECK(cfg.server.port == 9000);
@@ -100,7 +106,10 @@ TEST_CASE("a full config fills every field") {
     CHECK(*o.finest_eps == 0.5);
     CHECK(o.eps_levels == std::vector<double>{1, 2.5});
     CHECK(o.datum == tb::tiler::VerticalDatum::Ellipsoid);
-    CHECK(cfg.layers[0].formats == std::vector<tb::tiler::Format>{tb::tiler::Format::Drc});
+    CHECK(cfg.layers[0].formats ==
+          std::vector<tb::tiler::Format>{tb::tiler::Format::Drc, tb::tiler::Format::Mapbox});
+    CHECK(o.dem_tile_size == 256);
+    CHECK(o.dem_heights == tb::tiler::DemHeights::Ellipsoid);
     CHECK(*cfg.layers[0].store == (dir.path / "out/tiles.sqlite").string());
 }
 
@@ -114,7 +123,8 @@ TEST_CASE("every problem of a bad config is reported together with its JSON poin
       "layers": [
         {"name": "a", "sources": ["missing.tif"], "finest_eps": -1, "tile_size": 1,
          "min_zoom": 9, "max_zoom": 4, "formats": ["png"], "datum": 3, "extra": true},
-        {"name": "a", "sources": ["ok.hgt"], "eps_levels": [0.0001], "store": "nodir/x.sqlite"},
+        {"name": "a", "sources": ["ok.hgt"], "eps_levels": [0.0001], "store": "nodir/x.sqlite",
+         "dem_tile_size": 300, "dem_heights": "geoid"},
         {"name": "bad name!", "sources": "ok.hgt"},
         {"sources": []}
       ],
@@ -132,11 +142,15 @@ TEST_CASE("every problem of a bad config is reported together with its JSON poin
         path + ": /layers/0/finest_eps: expected a number > 0, got -1",
         path + ": /layers/0/tile_size: expected an integer 2..4096, got 1",
         path + ": /layers/0/max_zoom: expected max_zoom >= min_zoom (9), got 4",
-        path + ": /layers/0/formats/0: expected one of \"glb\", \"drc\", got \"png\"",
+        path + ": /layers/0/formats/0: expected one of \"glb\", \"drc\", \"terrarium\", "
+               "\"mapbox\", got \"png\"",
         path + ": /layers/0/datum: expected one of \"auto\"",
         path + ": /layers/0/extra: unknown key",
         path + ": /layers/1/name: duplicate layer name \"a\" (also /layers/0/name)",
         path + ": /layers/1/eps_levels/0: expected at least 0.001",
+        path + ": /layers/1/dem_tile_size: expected 256 or 512, got 300",
+        path + ": /layers/1/dem_heights: expected one of \"sea_level\", \"ellipsoid\", got "
+               "\"geoid\"",
         path + ": /layers/1/store: directory " + (dir.path / "nodir").string() + " does not exist",
         path + ": /layers/2/name: expected 1..64 characters",
         path + ": /layers/2/sources: expected an array, got string",
@@ -147,7 +161,7 @@ TEST_CASE("every problem of a bad config is reported together with its JSON poin
     for (const auto& line : expected) {
         CHECK_MESSAGE(message.find(line) != std::string::npos, "missing: " << line);
     }
-    CHECK(message.find("21 problems in " + path) == 0);
+    CHECK(message.find("23 problems in " + path) == 0);
 }
 
 TEST_CASE("a config that is not JSON names the file and the position") {

@@ -2,6 +2,7 @@
 // real DEM, into both stores; kill and resume, shards, thread counts, bad input.
 #include "core/error.hpp"
 #include "tiler/build/build.hpp"
+#include "tiler/dem_tiles.hpp"
 #include "tiler/formats/draco_decode.hpp"
 #include "tiler/stores/store.hpp"
 
@@ -561,4 +562,116 @@ TEST_CASE("a --bbox build makes only the tiles meeting the box, the same bytes, 
         REQUIRE(whole.count(key) == 1);
         CHECK(whole.at(key) == bytes);
     }
+}
+
+TEST_CASE("build --formats glb,terrarium,mapbox writes the DEM pyramid beside the mesh tiles, "
+          "tile for tile what the layer makes, into both stores, and resumes") {
+    BuildDir dir;
+    const auto dem = write_dem(dir / "dem.tif");
+    const std::vector<std::string> dem_args = {
+        "--formats", "glb,terrarium,mapbox", "--dem-size", "256", "--json"};
+    const Run a = run(args(dem, dir / "out", dem_args), dir);
+    INFO(a.err);
+    REQUIRE(a.code == 0);
+    CHECK(a.out.find("\"tileset_written\":true") != std::string::npos);
+
+    // The expected DEM tiles: every tile of the layer's DEM pyramid, in both encodings.
+    LayerOptions o;
+    o.sources = {dem};
+    o.dem_tile_size = 256;
+    const auto layer = Layer::open(o);
+    const DemTilePlan plan = dem_tile_plan(*layer);
+    std::map<std::string, std::string> expected;
+    std::int64_t dem_tiles = 0;
+    for (int z = plan.min_zoom; z <= plan.max_zoom; ++z) {
+        const TileRange r = dem_tiles_at(*layer, z);
+        for (std::int64_t y = r.y0; y <= r.y1; ++y) {
+            for (std::int64_t x = r.x0; x <= r.x1; ++x) {
+                const TileId id{z, x, y};
+                const std::string zxy =
+                    std::to_string(z) + "/" + std::to_string(x) + "/" + std::to_string(y);
+                expected["dem/" + zxy + ".png"] = make_dem_tile(*layer, id, Format::Terrarium);
+                expected["dem/mapbox/" + zxy + ".png"] = make_dem_tile(*layer, id, Format::Mapbox);
+                ++dem_tiles;
+            }
+        }
+    }
+    REQUIRE(dem_tiles >= 2);
+    CHECK(a.out.find("\"dem_written\":" + std::to_string(dem_tiles) + ",") != std::string::npos);
+    CHECK(a.err.find("of them DEM tiles") != std::string::npos);
+    std::map<std::string, std::string> written;
+    for (const auto& [rel, bytes] : tree(dir.path / "out/terrain")) {
+        if (rel.ends_with(".png")) {
+            written[rel] = bytes;
+        }
+    }
+    CHECK(written.size() == expected.size());
+    CHECK((written == expected));
+    // Mesh tiles are all there too: every tile the tileset lists.
+    for (const auto& t : tileset_tiles(dir.path / "out/terrain")) {
+        CHECK(fs::exists(dir.path / "out/terrain" / t));
+    }
+
+    // The SQLite store holds the same DEM tiles under their format names.
+    const Run b = run(args(dem, dir / "out.sqlite", dem_args), dir);
+    INFO(b.err);
+    REQUIRE(b.code == 0);
+    std::size_t in_db = 0;
+    for (const auto& [key, bytes] : sqlite_tiles(dir / "out.sqlite")) {
+        for (const char* encoding : {"terrarium", "mapbox"}) {
+            const std::string prefix = std::string("terrain/") + encoding + "/-1/";
+            if (key.rfind(prefix, 0) == 0) {
+                std::string zxy = key.substr(prefix.size());
+                zxy.pop_back(); // the trailing '/'
+                const std::string rel = std::string(encoding) == "terrarium"
+                                            ? "dem/" + zxy + ".png"
+                                            : "dem/mapbox/" + zxy + ".png";
+                CHECK(expected.at(rel) == bytes);
+                ++in_db;
+            }
+        }
+    }
+    CHECK(in_db == expected.size());
+
+    // A resumed build finds everything there; another DEM tile size is a different build.
+    const Run again =
+        run(args(dem,
+                 dir / "out",
+                 {"--formats", "glb,terrarium,mapbox", "--dem-size", "256", "--resume", "--json"}),
+            dir);
+    INFO(again.err);
+    REQUIRE(again.code == 0);
+    CHECK(again.out.find("\"written\":0,") != std::string::npos);
+    const Run other =
+        run(args(dem,
+                 dir / "out",
+                 {"--formats", "glb,terrarium,mapbox", "--dem-size", "512", "--resume"}),
+            dir);
+    CHECK(other.code == 2);
+    CHECK(other.err.find("dem_tile_size was 256, now 512") != std::string::npos);
+}
+
+TEST_CASE("a build of DEM tiles alone writes no tileset and no mesh tile") {
+    BuildDir dir;
+    const auto dem = write_dem(dir / "dem.tif");
+    const Run a = run(args(dem, dir / "out", {"--formats", "terrarium", "--json"}), dir);
+    INFO(a.err);
+    REQUIRE(a.code == 0);
+    CHECK(a.out.find("\"tileset_written\":false") != std::string::npos);
+    CHECK_FALSE(fs::exists(dir.path / "out/terrain/tileset.json"));
+    CHECK(count_tiles(dir.path / "out/terrain") == 0);
+    std::size_t pngs = 0;
+    for (const auto& [rel, bytes] : tree(dir.path / "out/terrain")) {
+        pngs += rel.ends_with(".png") ? 1 : 0;
+        CHECK(rel.find("mapbox") == std::string::npos);
+    }
+    CHECK(pngs > 0);
+    CHECK(a.out.find("\"dem_written\":" + std::to_string(pngs) + ",") != std::string::npos);
+    const Run bad = run(args(dem, dir / "other", {"--formats", "png"}), dir);
+    CHECK(bad.code == 2);
+    CHECK(bad.err.find("unknown format 'png'") != std::string::npos);
+    const Run size =
+        run(args(dem, dir / "other", {"--formats", "terrarium", "--dem-size", "300"}), dir);
+    CHECK(size.code == 2);
+    CHECK(size.err.find("--dem-size 300: expected 256 or 512") != std::string::npos);
 }

@@ -191,6 +191,31 @@ TEST_CASE("the SQLite store round-trips tiles and documents byte-exact and keeps
     CHECK(db->describe().rfind("sqlite ", 0) == 0);
 }
 
+TEST_CASE("DEM tiles never collide with mesh tiles of the same z/x/y, in either store") {
+    TempDir dir;
+    for (const std::string name : {"out", "out.sqlite"}) {
+        CAPTURE(name);
+        auto store = TileStore::open((dir.path / name).string());
+        // Same z/x/y in all four formats, each with its own bytes.
+        const Format formats[] = {Format::Glb, Format::Drc, Format::Terrarium, Format::Mapbox};
+        for (unsigned k = 0; k < 4; ++k) {
+            store->put(key(9, 272, 155, formats[k]), random_bytes(5000 + k, 10 + k));
+        }
+        for (unsigned k = 0; k < 4; ++k) {
+            CHECK(store->get(key(9, 272, 155, formats[k])) == random_bytes(5000 + k, 10 + k));
+        }
+        CHECK_FALSE(store->contains(key(9, 272, 156, Format::Terrarium)));
+        // DEM tiles have one height per pixel and no eps variants.
+        CHECK_THROWS_AS(store->put(key(9, 272, 155, Format::Mapbox, 0), "x"), tb::InputError);
+        CHECK_THROWS_AS(store->get(key(9, 272, 155, Format::Terrarium, 1)), tb::InputError);
+    }
+    // The directory layout: terrarium at the server's URL (without ?encoding), mapbox beside.
+    CHECK(fs::file_size(dir.path / "out/terrain/dem/9/272/155.png") == 5002);
+    CHECK(fs::file_size(dir.path / "out/terrain/dem/mapbox/9/272/155.png") == 5003);
+    CHECK(fs::file_size(dir.path / "out/terrain/9/272/155.glb") == 5000);
+    CHECK(temp_files_under(dir.path).empty());
+}
+
 TEST_CASE("both stores reject layer and document names that would escape the output") {
     TempDir dir;
     auto directory = TileStore::open((dir.path / "out").string());

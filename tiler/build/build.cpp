@@ -5,6 +5,7 @@
 #include "tiler/build/build.hpp"
 
 #include "core/error.hpp"
+#include "tiler/dem_tiles.hpp"
 #include "tiler/log.hpp"
 #include "tiler/stores/store.hpp"
 
@@ -115,9 +116,17 @@ Manifest make_manifest(const BuildOptions& o, const Layer& layer, int shard_coun
     }
     std::string formats = "[";
     for (std::size_t i = 0; i < o.formats.size(); ++i) {
-        formats += std::string(i ? ", " : "") + json_string(extension(o.formats[i]));
+        formats += std::string(i ? ", " : "") + json_string(format_name(o.formats[i]));
     }
     m.emplace_back("formats", formats + "]");
+    if (std::any_of(o.formats.begin(), o.formats.end(), is_dem_format)) {
+        // Only with DEM formats, so manifests of mesh-only builds stay as they were.
+        const DemTilePlan dem = dem_tile_plan(layer);
+        m.emplace_back("dem_tile_size", std::to_string(dem.tile_size));
+        m.emplace_back("dem_heights", json_string(to_string(o.layer.dem_heights)));
+        m.emplace_back("dem_min_zoom", std::to_string(dem.min_zoom));
+        m.emplace_back("dem_max_zoom", std::to_string(dem.max_zoom));
+    }
     std::string eps = "[";
     for (int z = layer.min_zoom(); z <= layer.max_zoom(); ++z) {
         eps += (z > layer.min_zoom() ? ", " : "") + json_number(layer.eps_for_zoom(z));
@@ -189,6 +198,7 @@ void compare_manifests(const Manifest& was,
 struct Made {
     TileId id;
     std::vector<std::pair<Format, std::string>> tiles;
+    bool dem = false; // a tile of the DEM pyramid
 };
 
 class Queue {
@@ -238,6 +248,9 @@ struct Plan {
     std::vector<TileRange> ranges;     // one per zoom, possibly empty
     std::vector<std::int64_t> offsets; // index of each range's first tile
     std::int64_t total = 0;
+    std::int64_t mesh_total = 0; // tiles before this index are mesh tiles, the rest DEM tiles
+
+    bool dem(std::int64_t i) const { return i >= mesh_total; }
 
     TileId at(std::int64_t i) const {
         const auto k = static_cast<std::size_t>(
@@ -249,12 +262,18 @@ struct Plan {
     }
 };
 
-Plan make_plan(const Layer& layer, const BuildOptions& o) {
-    Plan plan;
-    for (int z = layer.min_zoom(); z <= layer.max_zoom(); ++z) {
-        TileRange r = layer.tiles_at(z);
+// Appends the non-empty ranges of zooms min_z..max_z of one pyramid, cut to --bbox.
+template <typename RangeAt>
+void add_ranges(Plan& plan,
+                const BuildOptions& o,
+                Scheme scheme,
+                int min_z,
+                int max_z,
+                const RangeAt& range_at) {
+    for (int z = min_z; z <= max_z; ++z) {
+        TileRange r = range_at(z);
         if (o.bbox) {
-            const TileRange b = tiles_covering(o.layer.scheme, *o.bbox, z);
+            const TileRange b = tiles_covering(scheme, *o.bbox, z);
             r.x0 = std::max(r.x0, b.x0);
             r.y0 = std::max(r.y0, b.y0);
             r.x1 = std::min(r.x1, b.x1);
@@ -267,6 +286,27 @@ Plan make_plan(const Layer& layer, const BuildOptions& o) {
         plan.offsets.push_back(plan.total);
         plan.ranges.push_back(r);
         plan.total += r.count();
+    }
+}
+
+// Mesh tiles first (when a mesh format is asked for), then the DEM pyramid's tiles (when a DEM
+// format is).
+Plan make_plan(const Layer& layer, const BuildOptions& o) {
+    Plan plan;
+    const bool mesh =
+        std::any_of(o.formats.begin(), o.formats.end(), [](Format f) { return !is_dem_format(f); });
+    const bool dem = std::any_of(o.formats.begin(), o.formats.end(), is_dem_format);
+    if (mesh) {
+        add_ranges(plan, o, o.layer.scheme, layer.min_zoom(), layer.max_zoom(), [&](int z) {
+            return layer.tiles_at(z);
+        });
+    }
+    plan.mesh_total = plan.total;
+    if (dem) {
+        const DemTilePlan d = dem_tile_plan(layer);
+        add_ranges(plan, o, Scheme::Mercator, d.min_zoom, d.max_zoom, [&](int z) {
+            return dem_tiles_at(layer, z);
+        });
     }
     return plan;
 }
@@ -526,13 +566,13 @@ void check_options(const BuildOptions& o) {
                          ": expected 1..1024 (or 0 for one per core)");
     }
     if (o.formats.empty()) {
-        throw InputError("build: --formats: name at least one of glb, drc");
+        throw InputError("build: --formats: name at least one of glb, drc, terrarium, mapbox");
     }
     for (std::size_t i = 0; i < o.formats.size(); ++i) {
         for (std::size_t j = 0; j < i; ++j) {
             if (o.formats[i] == o.formats[j]) {
-                throw InputError(std::string("build: --formats names ") + extension(o.formats[i]) +
-                                 " twice");
+                throw InputError(std::string("build: --formats names ") +
+                                 format_name(o.formats[i]) + " twice");
             }
         }
     }
@@ -618,6 +658,7 @@ int shard_of(const TileId& id, int count) {
 std::string to_json(const BuildSummary& s) {
     return "{\"planned\":" + std::to_string(s.planned) +
            ",\"written\":" + std::to_string(s.written) +
+           ",\"dem_written\":" + std::to_string(s.dem_written) +
            ",\"skipped\":" + std::to_string(s.skipped) + ",\"empty\":" + std::to_string(s.empty) +
            ",\"failed\":" + std::to_string(s.failed) + ",\"bytes\":" + std::to_string(s.bytes) +
            ",\"seconds\":" + json_number(s.seconds) +
@@ -672,6 +713,8 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
     }
 
     const Plan plan = make_plan(*layer, o);
+    const bool mesh_formats =
+        std::any_of(o.formats.begin(), o.formats.end(), [](Format f) { return !is_dem_format(f); });
     const bool check_present = o.resume || o.shard || o.finalize;
     BuildSummary summary;
 
@@ -695,8 +738,9 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
         }
         summary.planned = summary.skipped + summary.empty;
         store->clean_up(name);
-        summary.tileset_written = write_tileset(*layer, *store, name, o.bbox.has_value());
-        if (!summary.tileset_written) {
+        summary.tileset_written =
+            mesh_formats && write_tileset(*layer, *store, name, o.bbox.has_value());
+        if (mesh_formats && !summary.tileset_written) {
             throw IoError(where + ": --finalize: tiles the tileset lists are missing although "
                                   "every shard reported (see the warning above); run each shard "
                                   "again with --resume");
@@ -746,27 +790,33 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
                     return;
                 }
                 const TileId id = plan.at(i);
+                const bool dem = plan.dem(i);
                 if (!mine(id)) {
                     continue;
                 }
-                if (!layer->may_have_tile(id)) {
+                if (!dem && !layer->may_have_tile(id)) {
                     ++counters.empty;
                     continue;
                 }
                 if (check_present) {
                     bool all = true;
                     for (Format f : o.formats) {
-                        all = all && store->contains(TileKey{name, id, f, -1});
+                        if (is_dem_format(f) == dem) {
+                            all = all && store->contains(TileKey{name, id, f, -1});
+                        }
                     }
                     if (all) {
                         ++counters.skipped;
                         continue;
                     }
                 }
-                Made made{id, {}};
+                Made made{id, {}, dem};
                 try {
                     for (Format f : o.formats) {
-                        made.tiles.emplace_back(f, layer->make_tile(id, f));
+                        if (is_dem_format(f) == dem) {
+                            made.tiles.emplace_back(
+                                f, dem ? make_dem_tile(*layer, id, f) : layer->make_tile(id, f));
+                        }
                     }
                 } catch (const NotFound&) {
                     ++counters.empty;
@@ -775,7 +825,8 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
                     throw; // the DEM became unreadable: no point going on
                 } catch (const std::exception& e) {
                     ++counters.failed;
-                    log::error("build: tile " + tile_name(id) + ": " + e.what());
+                    log::error(std::string("build: ") + (dem ? "DEM tile " : "tile ") +
+                               tile_name(id) + ": " + e.what());
                     continue;
                 }
                 if (!queue.push(std::move(made))) {
@@ -804,6 +855,7 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
     std::vector<StoredTile> batch;
     auto last_flush = Clock::now();
     std::int64_t batch_tiles = 0;
+    std::int64_t batch_dem_tiles = 0;
     std::exception_ptr writer_error;
     auto flush = [&] {
         if (batch.empty()) {
@@ -815,6 +867,8 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
         }
         store->put_batch(batch);
         summary.written += batch_tiles;
+        summary.dem_written += batch_dem_tiles;
+        batch_dem_tiles = 0;
         summary.bytes += bytes;
         batch.clear();
         batch_tiles = 0;
@@ -828,6 +882,7 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
                     batch.push_back({TileKey{name, made->id, f, -1}, std::move(bytes)});
                 }
                 ++batch_tiles;
+                batch_dem_tiles += made->dem ? 1 : 0;
                 ++counters.made;
             } else if (running.load() == 0) {
                 // Workers are gone and nothing came within the wait: the queue is drained
@@ -839,6 +894,7 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
                     batch.push_back({TileKey{name, made->id, f, -1}, std::move(bytes)});
                 }
                 ++batch_tiles;
+                batch_dem_tiles += made->dem ? 1 : 0;
                 ++counters.made;
             }
             const double since = std::chrono::duration<double>(Clock::now() - last_flush).count();
@@ -880,7 +936,9 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
                 shard_record_text(*o.shard, summary.written + summary.skipped, summary.empty));
         } else {
             store->clean_up(name);
-            summary.tileset_written = write_tileset(*layer, *store, name, o.bbox.has_value());
+            // A build of DEM tiles alone has no mesh tiles for a tileset to list.
+            summary.tileset_written =
+                mesh_formats && write_tileset(*layer, *store, name, o.bbox.has_value());
         }
     }
     summary.seconds = std::chrono::duration<double>(Clock::now() - start).count();

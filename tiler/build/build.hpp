@@ -46,6 +46,8 @@ struct BuildOptions {
     LayerOptions layer;            // name, sources, scheme, tile size, zooms, finest eps
     std::string output;            // a directory, or a file ending in .sqlite / .db
     std::optional<LonLatBox> bbox; // only tiles meeting this box (degrees)
+    // Mesh formats make the layer's pyramid; DEM formats (terrarium, mapbox) the EPSG:3857 DEM
+    // pyramid of tiler/dem_tiles.hpp, written alongside.
     std::vector<Format> formats{Format::Glb};
     int threads = 0;                // worker threads; 0 = one per core
     bool resume = false;            // continue a build: same manifest, present tiles skipped
@@ -57,7 +59,7 @@ struct BuildOptions {
 
 struct BuildSummary {
     std::int64_t planned = 0; // tiles of this run (this shard's share)
-    std::int64_t written = 0; // tiles made and written now
+    std::int64_t written = 0; // tiles made and written now (DEM tiles included)
     std::int64_t skipped = 0; // already in the store (resume)
     std::int64_t empty = 0;   // no data there (NotFound): nothing written
     std::int64_t failed = 0;  // make_tile threw anything else: logged, nothing written
@@ -65,6 +67,8 @@ struct BuildSummary {
     double seconds = 0;
     bool interrupted = false; // stopped by the stop flag (SIGINT/SIGTERM)
     bool tileset_written = false;
+    // Of `written`, the raster DEM tiles (their own pyramid).
+    std::int64_t dem_written = 0;
 };
 
 // One line of JSON: {"planned":..,"written":..,...,"interrupted":false}.

@@ -2,22 +2,42 @@
 
 namespace tb::tiler {
 
-std::optional<Format> parse_format(std::string_view ext) {
-    if (ext == "glb") {
-        return Format::Glb;
-    }
-    if (ext == "drc") {
-        return Format::Drc;
+std::optional<Format> parse_format(std::string_view name) {
+    for (Format f : {Format::Glb, Format::Drc, Format::Terrarium, Format::Mapbox}) {
+        if (name == format_name(f)) {
+            return f;
+        }
     }
     return std::nullopt;
 }
 
+const char* format_name(Format format) {
+    switch (format) {
+    case Format::Glb:
+        return "glb";
+    case Format::Drc:
+        return "drc";
+    case Format::Terrarium:
+        return "terrarium";
+    case Format::Mapbox:
+        return "mapbox";
+    }
+    return "?";
+}
+
 const char* extension(Format format) {
-    return format == Format::Glb ? "glb" : "drc";
+    return is_dem_format(format) ? "png" : format_name(format);
 }
 
 const char* media_type(Format format) {
+    if (is_dem_format(format)) {
+        return "image/png";
+    }
     return format == Format::Glb ? "model/gltf-binary" : "application/octet-stream";
+}
+
+bool is_dem_format(Format format) {
+    return format == Format::Terrarium || format == Format::Mapbox;
 }
 
 } // namespace tb::tiler

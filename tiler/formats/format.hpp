@@ -1,5 +1,5 @@
 #pragma once
-// Encoded tile formats, with their file extensions and media types.
+// Encoded tile formats, with their names, file extensions and media types.
 #include <optional>
 #include <string_view>
 
@@ -8,10 +8,19 @@ namespace tb::tiler {
 enum class Format {
     Glb, // glTF 2.0 binary, KHR_draco_mesh_compression, ECEF relative to the tile centre
     Drc, // raw Draco, local ENU metres z-up, with geometry metadata
+    // Raster DEM tiles (EPSG:3857 XYZ PNG, tiler/dem_tiles.hpp), one per height encoding:
+    Terrarium, // h = R * 256 + G + B / 256 - 32768
+    Mapbox,    // Terrain-RGB: h = -10000 + (R * 65536 + G * 256 + B) * 0.1
 };
 
-std::optional<Format> parse_format(std::string_view extension); // "glb" | "drc"
-const char* extension(Format format);                           // "glb" | "drc"
-const char* media_type(Format format); // model/gltf-binary | application/octet-stream
+// "glb" | "drc" | "terrarium" | "mapbox": how configs, build options, stores and caches name a
+// format (unique per format).
+std::optional<Format> parse_format(std::string_view name);
+const char* format_name(Format format);
+const char* extension(Format format);  // "glb" | "drc" | "png"
+const char* media_type(Format format); // model/gltf-binary | application/octet-stream | image/png
+// True for the raster DEM formats (terrarium, mapbox), which tile EPSG:3857 whatever the
+// layer's scheme.
+bool is_dem_format(Format format);
 
 } // namespace tb::tiler

@@ -117,6 +117,11 @@ void validate_key(const TileKey& key) {
                          std::to_string(id.y) + ": outside every tiling scheme (z 0.." +
                          std::to_string(kMaxZoom) + ", x and y from 0 below 2^(z+1))");
     }
+    if (is_dem_format(key.format) && key.eps_level != -1) {
+        throw InputError(std::string(format_name(key.format)) +
+                         " DEM tiles have no eps levels; expected eps level -1, got " +
+                         std::to_string(key.eps_level));
+    }
     if (key.eps_level < -1) {
         throw InputError("eps level " + std::to_string(key.eps_level) +
                          ": expected -1 (the zoom's ladder eps) or a level index >= 0");

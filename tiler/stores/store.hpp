@@ -1,7 +1,8 @@
 #pragma once
 // Tile stores: where encoded tiles live once made. Two stores behind one interface:
 //   directory: OUT/{layer}/{z}/{x}/{y}.{ext}, eps variants under
-//   OUT/{layer}/eps{k}/{z}/{x}/{y}.{ext},
+//   OUT/{layer}/eps{k}/{z}/{x}/{y}.{ext}, raster DEM tiles under OUT/{layer}/dem/{z}/{x}/{y}.png
+//              (terrarium) and OUT/{layer}/dem/mapbox/{z}/{x}/{y}.png,
 //              documents at OUT/{layer}/{name} (name may hold '/': "subtrees/0/0/0.subtree");
 //   SQLite:    one file (*.sqlite or *.db), WAL, tables tiles(layer, format, eps_level, z, x, y,
 //              data), documents(layer, name, data) and meta(name, value).
@@ -73,7 +74,7 @@ void validate_layer_name(const std::string& layer);
 // NUL, at most 512 bytes, so that nothing escapes the layer. InputError otherwise.
 void validate_document_name(const std::string& name);
 // The layer name plus a tile inside the scheme-independent bounds (0 <= z <= kMaxZoom,
-// 0 <= x, y < 2^(z+1)) and eps_level >= -1. InputError otherwise.
+// 0 <= x, y < 2^(z+1)) and eps_level >= -1 (exactly -1 for DEM formats). InputError otherwise.
 void validate_key(const TileKey& key);
 
 } // namespace tb::tiler

@@ -227,6 +227,11 @@ private:
     std::string tile_path(const TileKey& key) const {
         validate_key(key);
         std::string path = root_ + "/" + key.layer + "/";
+        if (key.format == Format::Terrarium) {
+            path += "dem/"; // the server's URL without ?encoding
+        } else if (key.format == Format::Mapbox) {
+            path += "dem/mapbox/";
+        }
         if (key.eps_level >= 0) {
             path += "eps" + std::to_string(key.eps_level) + "/";
         }

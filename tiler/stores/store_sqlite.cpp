@@ -266,7 +266,7 @@ private:
 
     static void bind_key(sqlite3_stmt* s, const TileKey& key) {
         bind_text(s, 1, key.layer);
-        bind_text(s, 2, extension(key.format));
+        bind_text(s, 2, format_name(key.format));
         sqlite3_bind_int(s, 3, key.eps_level);
         sqlite3_bind_int(s, 4, key.id.z);
         sqlite3_bind_int64(s, 5, key.id.x);
