@@ -1,8 +1,8 @@
 // terrabound info: what a DEM is.
 #include "core/error.hpp"
 #include "server/commands.hpp"
-#include "tiler/sources/gdal_source.hpp"
 #include "tiler/layer.hpp"
+#include "tiler/sources/gdal_source.hpp"
 
 #include <cmath>
 #include <cstdio>
@@ -104,6 +104,14 @@ std::string describe_pyramid(const std::string& path, tiler::Scheme scheme) {
         << " .. " << layer->max_height() << " m)\n";
     out << "  footprint:   west " << b.west << ", south " << b.south << ", east " << b.east
         << ", north " << b.north << " (pixel centres)\n";
+    const bool pixels = layer->guarantee() == tiler::Guarantee::SourcePixels;
+    out << "  guarantee:   "
+        << (pixels ? "by construction: tiles are meshed on the DEM's own pixel centres at full "
+                     "resolution at every zoom, so each tile's eps holds at every valid pixel"
+                   : "measured: tiles are meshed on each zoom's lattice in the scheme's CRS and "
+                     "checked at every valid source pixel centre (reprojected); a tile whose "
+                     "measured error exceeds eps publishes the larger bound")
+        << "\n";
     out << "    zoom  tiles       columns x rows      eps (m)     reads\n";
     for (int z = layer->min_zoom(); z <= layer->max_zoom(); ++z) {
         const tiler::TileRange r = layer->tiles_at(z);
@@ -116,7 +124,11 @@ std::string describe_pyramid(const std::string& path, tiler::Scheme scheme) {
                       static_cast<long long>(r.x1 - r.x0 + 1),
                       static_cast<long long>(r.y1 - r.y0 + 1),
                       layer->eps_for_zoom(z),
-                      describe_read(layer->source().read_level(o.scheme, z, o.tile_size)).c_str());
+                      pixels
+                          ? "full resolution (the DEM's pixels)"
+                          : (describe_read(layer->source().read_level(o.scheme, z, o.tile_size)) +
+                             ", checked at full resolution")
+                                .c_str());
         out << line;
     }
     return out.str();
@@ -143,9 +155,10 @@ const Command& info_command() {
          "Describe a DEM: size, CRS, data type, nodata, height range, resolution, pyramid.",
          {{"scheme", "NAME", "pyramid plan for geodetic (default) or mercator tiles"}},
          "The pyramid plan is what 'terrabound build' and 'serve' make of the DEM alone with\n"
-         "default options: zoom range, tiles per zoom, each zoom's eps (metres) and what its\n"
-         "tiles read: full resolution, every 2^k-th pixel, or an overview (make them with\n"
-         "'gdaladdo -r average DEM' for fast coarse zooms on a large DEM)."},
+         "default options: zoom range, tiles per zoom, each zoom's eps (metres), how that eps\n"
+         "is made true at the DEM's own pixels (the guarantee), and what its tiles read: the\n"
+         "DEM's pixels at full resolution (lon/lat DEMs, and EPSG:3857 ones for mercator), or\n"
+         "for other CRSs every 2^k-th pixel or an overview, checked at full resolution."},
         run};
     return command;
 }
