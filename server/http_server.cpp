@@ -918,7 +918,15 @@ struct HttpServer::Impl {
         server.Get("/metrics", [this](const httplib::Request&, httplib::Response& res) {
             t_request.route = "metrics";
             res.set_header("Cache-Control", kNoStore);
-            res.set_content(metrics.render(), "text/plain; version=0.0.4; charset=utf-8");
+            std::string text = metrics.render();
+            text += "# HELP tb_tiles_over_eps Tiles made whose error measured at the source's "
+                    "pixels exceeds their zoom's eps (they publish the larger bound).\n"
+                    "# TYPE tb_tiles_over_eps gauge\n";
+            for (const auto& served : tiles.layers()) {
+                text += "tb_tiles_over_eps{layer=\"" + served.layer->options().name + "\"} " +
+                        std::to_string(served.layer->tiles_over_eps()) + "\n";
+            }
+            res.set_content(text, "text/plain; version=0.0.4; charset=utf-8");
         });
 
         server.Get("/layers", [this](const httplib::Request& req, httplib::Response& res) {

@@ -663,7 +663,8 @@ std::string to_json(const BuildSummary& s) {
            ",\"failed\":" + std::to_string(s.failed) + ",\"bytes\":" + std::to_string(s.bytes) +
            ",\"seconds\":" + json_number(s.seconds) +
            ",\"interrupted\":" + (s.interrupted ? "true" : "false") +
-           ",\"tileset_written\":" + (s.tileset_written ? "true" : "false") + "}";
+           ",\"tileset_written\":" + (s.tileset_written ? "true" : "false") +
+           ",\"tiles_over_eps\":" + std::to_string(s.over_eps) + "}";
 }
 
 BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop) {
@@ -940,6 +941,13 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
             summary.tileset_written =
                 mesh_formats && write_tileset(*layer, *store, name, o.bbox.has_value());
         }
+    }
+    summary.over_eps = static_cast<std::int64_t>(layer->tiles_over_eps());
+    if (summary.over_eps > 0) {
+        log::warn("build: " + std::to_string(summary.over_eps) +
+                  " tile(s) measured above their zoom's eps at the source's pixels (its CRS is "
+                  "not the scheme's, so tiles are resampled); their tileset entries publish "
+                  "the measured bound");
     }
     summary.seconds = std::chrono::duration<double>(Clock::now() - start).count();
     return summary;

@@ -69,6 +69,9 @@ struct BuildSummary {
     bool tileset_written = false;
     // Of `written`, the raster DEM tiles (their own pyramid).
     std::int64_t dem_written = 0;
+    // Tiles whose error measured at the source's pixels exceeds their zoom's eps, so that they
+    // publish the larger bound (layers whose pixels are not on the scheme's grid only).
+    std::int64_t over_eps = 0;
 };
 
 // One line of JSON: {"planned":..,"written":..,...,"interrupted":false}.

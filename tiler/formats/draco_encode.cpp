@@ -565,6 +565,9 @@ std::string encode_tile(const TileRaster& raster,
         md->AddEntryDouble("min_h_m", z_min);
         md->AddEntryDouble("max_h_m", z_max);
         md->AddEntryDouble("eps_m", measured.published);
+        md->AddEntryString("eps_meaning",
+                           "metres: every valid source DEM pixel centre under the tile is within "
+                           "eps_m, vertically, of the decoded surface");
         md->AddEntryDouble("quant_step_m", step);
         md->AddEntryDouble("quant_error_m", budget.quant_error);
         md->AddEntryInt("level", raster.id.z);

@@ -131,7 +131,12 @@ void write_tile(const TilesetSpec& spec, const TileId& id, const std::string& up
 }
 
 std::string document(double geometric_error, const std::string& root) {
-    return R"({"asset":{"version":"1.1","generator":"Terrabound"},"geometricError":)" +
+    // What the numbers mean, for whoever reads the tileset.
+    return R"({"asset":{"version":"1.1","generator":"Terrabound","extras":{"geometricError":)"
+           R"("metres: every valid pixel of the source DEM whose centre lies under a tile is )"
+           R"(within the tile's geometricError, vertically, of the surface drawn from its )"
+           R"(decoded content (quantization and chord sag included), at every zoom"}},)"
+           R"("geometricError":)" +
            number(geometric_error) + R"(,"root":)" + root + "}\n";
 }
 
