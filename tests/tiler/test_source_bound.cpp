@@ -186,6 +186,9 @@ TEST_CASE("real DEMs: every source pixel is within the published error at the fi
     if (const auto p = tb_test::shared_dem("N46E008.tif")) { // steep, 7 % voids
         judge_layer(*p, Guarantee::SourcePixels);
     }
+    if (const auto p = tb_test::shared_dem("qgis_dem1.tif")) { // NAD83 lon/lat, 10" pixels
+        judge_layer(*p, Guarantee::SourcePixels);
+    }
     if (const auto p = tb_test::shared_dem("elev_vinschgau.tif")) { // UTM 32N
         judge_layer(*p, Guarantee::Measured);
     }
