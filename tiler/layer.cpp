@@ -298,6 +298,16 @@ private:
     // source's size.
     double tile_pixels(int z) const {
         const DemInfo& info = source_->info();
+        if (pixels_) {
+            // Exact for a pixel grid: the tile's width over the pixel's (a mercator tile spans
+            // no more latitude than longitude, and no more EPSG:3857 metres than its width).
+            const LonLatBox b = tile_bounds(options_.scheme, {z, 0, 0});
+            const double width = pixels_->lonlat ? b.east - b.west
+                                                 : lattice_x(options_.scheme, z, 1, 1) -
+                                                       lattice_x(options_.scheme, z, 1, 0);
+            return std::min<double>(width / pixels_->dx + 1, info.width) *
+                   std::min<double>(width / pixels_->dy + 1, info.height);
+        }
         const double side = source_->pixels_per_sample(options_.scheme, z, options_.tile_size) *
                                 options_.tile_size +
                             2;

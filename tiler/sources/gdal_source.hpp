@@ -150,10 +150,12 @@ public:
     virtual core::HeightGrid read_all() const = 0;
 };
 
-// The most source pixels one tile reads at full resolution (a tile of 2896 x 2896 pixels). Every
-// zoom meshes or checks the full-resolution pixels under a tile, so zooms whose tiles would hold
-// more are not offered (see Layer).
-inline constexpr double kMaxPixelsPerTile = 8.0 * 1024 * 1024;
+// The most source pixels one tile reads at full resolution (2048 x 2048). Every zoom meshes or
+// checks the full-resolution pixels under a tile, so zooms whose tiles would hold more are not
+// offered (see Layer). A tile's memory grows with its mesh, up to about 200 MB for a 0.7
+// Mpixel tile of the Andes at its eps, so this keeps a tile, and a build on two threads, within
+// a few hundred MB.
+inline constexpr double kMaxPixelsPerTile = 4.0 * 1024 * 1024;
 
 // Writes a tile raster as a georeferenced single-band Float32 GeoTIFF (EPSG:4326 or EPSG:3857
 // by scheme), the heights exactly as meshed, voids marked by an internal mask band. Written to
