@@ -127,15 +127,20 @@ struct Verdict {
     int column = -1, row = -1;
 };
 
-Verdict
-snapped_error(const TileRaster& raster, const TileMesh& mesh, const std::vector<Ecef>& world) {
-    const core::HeightGrid& grid = raster.grid;
-    std::vector<std::array<double, 3>> g(world.size());
+// Snapped vertices as clients decode them, back in raster's grid coordinates and height.
+using GridVertices = std::vector<std::array<double, 3>>;
+GridVertices to_grid(const TileRaster& raster, const std::vector<Ecef>& world) {
+    GridVertices g(world.size());
     for (std::size_t v = 0; v < world.size(); ++v) {
         const Geodetic p = to_geodetic(world[v]);
         lonlat_to_grid(raster, {p.lon, p.lat}, g[v][0], g[v][1]);
         g[v][2] = p.h;
     }
+    return g;
+}
+
+Verdict snapped_error(const TileRaster& raster, const TileMesh& mesh, const GridVertices& g) {
+    const core::HeightGrid& grid = raster.grid;
     const std::size_t count = static_cast<std::size_t>(grid.width) * grid.height;
     constexpr double kEdge = -1e-9; // barycentric slack: on an edge counts as inside
     std::vector<double> outside(count, std::numeric_limits<double>::infinity());
@@ -188,22 +193,16 @@ snapped_error(const TileRaster& raster, const TileMesh& mesh, const std::vector<
 
 // The check points against the snapped surface, located by bucketing them into grid cells and
 // walking each triangle's bounding cells.
-EncodeReport points_error(const TileRaster& raster,
-                          const TileMesh& mesh,
-                          const std::vector<Ecef>& world,
-                          const std::vector<CheckPoint>& points) {
+EncodeReport
+points_error(const TileMesh& mesh, const GridVertices& g, const std::vector<CheckPoint>& points) {
     EncodeReport report;
     if (points.empty()) {
         return report;
     }
-    std::vector<std::array<double, 3>> g(world.size());
     double c_lo = INFINITY, c_hi = -INFINITY, r_lo = INFINITY, r_hi = -INFINITY;
-    for (std::size_t v = 0; v < world.size(); ++v) {
-        const Geodetic p = to_geodetic(world[v]);
-        lonlat_to_grid(raster, {p.lon, p.lat}, g[v][0], g[v][1]);
-        g[v][2] = p.h;
-        c_lo = std::min(c_lo, g[v][0]), c_hi = std::max(c_hi, g[v][0]);
-        r_lo = std::min(r_lo, g[v][1]), r_hi = std::max(r_hi, g[v][1]);
+    for (const auto& v : g) {
+        c_lo = std::min(c_lo, v[0]), c_hi = std::max(c_hi, v[0]);
+        r_lo = std::min(r_lo, v[1]), r_hi = std::max(r_hi, v[1]);
     }
     const double c0 = std::floor(c_lo) - 1, r0 = std::floor(r_lo) - 1;
     const int cells_x = static_cast<int>(std::ceil(c_hi) - c0) + 2;
@@ -467,6 +466,7 @@ std::string encode_tile(const TileRaster& raster,
     double step = s;
     std::vector<std::array<std::int64_t, 3>> q(n);
     std::vector<Ecef> world(n);
+    GridVertices grid_world;
     for (int refine = 0;; ++refine) {
         step = std::ldexp(s, -refine);
         for (std::size_t v = 0; v < n; ++v) {
@@ -492,7 +492,8 @@ std::string encode_tile(const TileRaster& raster,
             }
         }
         finish_lattice(q, step, raster, budget); // throws when the lattice is too fine for the tile
-        const Verdict verdict = snapped_error(raster, mesh, world);
+        grid_world = to_grid(raster, world);
+        const Verdict verdict = snapped_error(raster, mesh, grid_world);
         if (verdict.max_error <= budget.eps) {
             if (refine > 0) {
                 log::debug("tile " + tile_name(raster.id) + ": interior lattice refined to " +
@@ -511,7 +512,7 @@ std::string encode_tile(const TileRaster& raster,
         }
     }
     const Snapped snap = finish_lattice(q, step, raster, budget);
-    EncodeReport measured = points_error(raster, mesh, world, points);
+    EncodeReport measured = points_error(mesh, grid_world, points);
     measured.published = budget.drawn_bound;
     if (!points.empty()) {
         // Rounded up, so the number printed is never below what was measured.
