@@ -123,6 +123,9 @@ int run(const Args& args) {
     if (args.has("eps-finest")) {
         o.layer.finest_eps = args.get_double("eps-finest", 0);
     }
+    if (args.has("nodata")) {
+        o.layer.nodata = args.get_double("nodata", 0);
+    }
     if (auto v = args.get("bbox")) {
         o.bbox = parse_bbox(*v);
     }
@@ -195,6 +198,7 @@ const Command& build_command() {
              {"eps-finest", "E", "vertical error bound at max zoom, metres; doubles per level up"},
              {"bbox", "W,S,E,N", "only tiles meeting this box, degrees (no tileset is written)"},
              {"formats", "LIST", "comma-separated: glb, drc (default glb)"},
+             {"nodata", "V", "raw sample value to treat as nodata, replacing the file's own"},
              {"threads", "N", "worker threads (default: one per core)"},
              {"resume", "", "continue a build: same parameters, tiles already there are kept"},
              {"force", "", "delete the layer's existing tiles and documents first"},

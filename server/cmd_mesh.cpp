@@ -2,13 +2,14 @@
 #include "core/error.hpp"
 #include "core/triangulate.hpp"
 #include "server/commands.hpp"
-#include "tiler/sources/gdal_source.hpp"
 #include "tiler/layer.hpp"
+#include "tiler/sources/gdal_source.hpp"
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <optional>
 #include <string>
 
 namespace tb::cli {
@@ -32,7 +33,11 @@ int run(const Args& args) {
         throw InputError("mesh: -o " + *out + ": unknown output type; use .obj or .json");
     }
     const auto start = std::chrono::steady_clock::now();
-    const core::HeightGrid grid = tiler::DemSource::open({input})->read_all();
+    std::optional<double> nodata;
+    if (args.has("nodata")) {
+        nodata = args.get_double("nodata", 0);
+    }
+    const core::HeightGrid grid = tiler::DemSource::open({input}, nodata)->read_all();
     if (grid.width < 2 || grid.height < 2) {
         throw InputError(input + ": " + std::to_string(grid.width) + " x " +
                          std::to_string(grid.height) + " samples; meshing needs at least 2 x 2");
@@ -84,6 +89,7 @@ const Command& mesh_command() {
               "print one JSON line: width, height, eps, vertices, triangles, "
               "max_error, seconds"},
              {"no-lock-border", "", "let the border be simplified like the interior"},
+             {"nodata", "V", "raw sample value to treat as nodata, replacing the file's own"},
          },
          "Band 1 is meshed in grid coordinates (x = column, y = row, row 0 first); nodata\n"
          "samples constrain nothing and are filled from their surroundings. No georeferencing\n"

@@ -174,6 +174,12 @@ int run(const Args& args) {
             layer.store = *store;
         }
     }
+    if (args.has("nodata")) {
+        const double nodata = args.get_double("nodata", 0);
+        for (auto& layer : cfg.layers) {
+            layer.options.nodata = nodata;
+        }
+    }
     log::Level level = log::Level::Info;
     if (log::parse_level(cfg.server.log_level, level)) {
         log::set_level(level);
@@ -250,6 +256,7 @@ const Command& serve_command() {
           {"port", "PORT", "port to listen on (default 8080; 0 picks a free port)"},
           {"threads", "N", "tile generation threads (default: one per core)"},
           {"web", "DIR", "the viewer's directory (default: web/ of this checkout; 'none': off)"},
+          {"nodata", "V", "raw sample value every layer treats as nodata (the config's nodata)"},
           {"store",
            "PATH",
            "keep generated tiles in this store for every layer: a directory, or a file "

@@ -3,9 +3,9 @@
 #include "core/error.hpp"
 #include "core/triangulate.hpp"
 #include "server/commands.hpp"
-#include "tiler/sources/gdal_source.hpp"
 #include "tiler/layer.hpp"
 #include "tiler/log.hpp"
+#include "tiler/sources/gdal_source.hpp"
 
 #include <algorithm>
 #include <cstdio>
@@ -47,6 +47,9 @@ int run(const Args& args) {
     }
     options.tile_size = static_cast<int>(size);
     options.datum = tiler::parse_datum(args.get("datum").value_or("auto"));
+    if (args.has("nodata")) {
+        options.nodata = args.get_double("nodata", 0);
+    }
     const auto layer = tiler::Layer::open(options);
     const double eps = args.has("eps") ? args.get_double("eps", 0) : layer->eps_for_zoom(id.z);
     tiler::check_eps(eps, "tile: --eps");
@@ -92,6 +95,7 @@ const Command& tile_command() {
              {"eps", "E", "vertical error bound in metres (default: the zoom's ladder eps)"},
              {"size", "N", "tile raster of (N+1) x (N+1) samples (default 256)"},
              {"datum", "NAME", "source heights: auto (default), egm96 or ellipsoid"},
+             {"nodata", "V", "raw sample value to treat as nodata, replacing the file's own"},
          },
          "Outputs: .glb (glTF + Draco, ECEF), .drc (Draco, local ENU), .obj (the mesh in tile\n"
          "grid coordinates: v column row height, heights above the WGS84 ellipsoid) and .tif\n"

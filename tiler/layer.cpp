@@ -44,7 +44,7 @@ class DemLayer final : public Layer {
 public:
     explicit DemLayer(const LayerOptions& options) : options_(options) {
         validate_options();
-        source_ = DemSource::open(options_.sources);
+        source_ = DemSource::open(options_.sources, options_.nodata);
         const DemInfo& info = source_->info();
         if (!source_->georeferenced()) {
             throw InputError(info.path + ": has no georeferencing; tiles need a CRS and a "

@@ -34,6 +34,7 @@ struct LayerOptions {
     std::optional<double> finest_eps;      // metres at max_zoom; eps doubles per level up
     std::vector<double> eps_levels;        // extra eps (metres) selectable per request
     VerticalDatum datum = VerticalDatum::Auto;
+    std::optional<double> nodata; // raw nodata value replacing the sources' own (--nodata)
 };
 
 // Where a tile request's eps comes from: the zoom's own ladder value, or one of the layer's
