@@ -151,6 +151,9 @@ int run(const Args& args) {
         cfg = config_from_dems(args.positional);
     }
     if (auto host = args.get("host")) {
+        if (const auto problem = config::host_problem(*host)) {
+            throw InputError("--host: " + *problem);
+        }
         cfg.server.host = *host;
     }
     if (args.has("port")) {
