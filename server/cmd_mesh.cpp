@@ -2,6 +2,7 @@
 #include "core/error.hpp"
 #include "core/triangulate.hpp"
 #include "server/commands.hpp"
+#include "tiler/json_number.hpp"
 #include "tiler/layer.hpp"
 #include "tiler/sources/gdal_source.hpp"
 
@@ -61,15 +62,15 @@ int run(const Args& args) {
     tiler::write_file_atomically(
         *out, ext == "obj" ? tiler::mesh_to_obj(mesh) : tiler::mesh_to_json(mesh));
     if (args.has("stats")) {
-        std::printf("{\"width\":%d,\"height\":%d,\"eps\":%.17g,\"vertices\":%zu,\"triangles\":%zu,"
-                    "\"max_error\":%.17g,\"seconds\":%.6f}\n",
+        std::printf("{\"width\":%d,\"height\":%d,\"eps\":%s,\"vertices\":%zu,\"triangles\":%zu,"
+                    "\"max_error\":%s,\"seconds\":%s}\n",
                     grid.width,
                     grid.height,
-                    eps,
+                    tiler::json_number(eps, "eps").c_str(),
                     mesh.points.size(),
                     mesh.triangle_count(),
-                    core::max_error(mesh, grid),
-                    seconds);
+                    tiler::json_number(core::max_error(mesh, grid), "max_error").c_str(),
+                    tiler::json_number(seconds, "seconds").c_str());
     }
     return 0;
 }

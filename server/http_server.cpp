@@ -3,6 +3,7 @@
 #include "server/http_server.hpp"
 
 #include "core/error.hpp"
+#include "tiler/json_number.hpp"
 #include "tiler/log.hpp"
 #include "tiler/tile_grid.hpp"
 
@@ -86,9 +87,7 @@ std::string html_escape(std::string_view text) {
 }
 
 std::string number(double v) {
-    char buf[32];
-    const auto r = std::to_chars(buf, buf + sizeof buf, v);
-    return std::string(buf, r.ptr);
+    return tiler::json_number(v, "a layer-list number");
 }
 
 const char* reason(int status) {

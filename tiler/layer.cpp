@@ -5,9 +5,9 @@
 #include "core/error.hpp"
 #include "core/triangulate.hpp"
 #include "tiler/formats/encode.hpp"
+#include "tiler/log.hpp"
 #include "tiler/sources/gdal_source.hpp"
 #include "tiler/sources/geoid.hpp"
-#include "tiler/log.hpp"
 
 #include <unistd.h>
 
@@ -359,7 +359,7 @@ std::string mesh_to_obj(const core::Mesh& mesh) {
     for (std::size_t v = 0; v < mesh.points.size(); ++v) {
         std::snprintf(line,
                       sizeof line,
-                      "v %d %d %.9g\n",
+                      "v %d %d %.17g\n",
                       mesh.points[v].x,
                       mesh.points[v].y,
                       static_cast<double>(mesh.z[v]));
@@ -383,7 +383,7 @@ std::string mesh_to_json(const core::Mesh& mesh) {
     for (std::size_t v = 0; v < mesh.points.size(); ++v) {
         std::snprintf(number,
                       sizeof number,
-                      "%s%d,%d,%.9g",
+                      "%s%d,%d,%.17g",
                       v ? "," : "",
                       mesh.points[v].x,
                       mesh.points[v].y,

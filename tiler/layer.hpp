@@ -4,8 +4,8 @@
 #include "core/mesh.hpp"
 #include "tiler/formats/encode.hpp"
 #include "tiler/formats/format.hpp"
-#include "tiler/tile_grid.hpp"
 #include "tiler/sources/tile_raster.hpp"
+#include "tiler/tile_grid.hpp"
 
 #include <memory>
 #include <optional>
@@ -97,8 +97,9 @@ void check_eps(double eps, const std::string& what);
 core::Mesh mesh_tile(const TileRaster& raster, const ErrorBudget& budget);
 
 // A mesh in grid coordinates as text: OBJ ("v column row height", 1-based "f i j k") or JSON
-// ({"vertices":[x,y,z,...],"triangles":[i,j,k,...]}, 0-based), heights with 9 significant
-// digits (float32 round trip). The formats shared/bench's linf_check reads.
+// ({"vertices":[x,y,z,...],"triangles":[i,j,k,...]}, 0-based), heights as the float the mesher
+// used, widened to double and written with 17 significant digits, so a reader parsing doubles
+// gets exactly that float's value. The formats shared/bench's linf_check reads.
 std::string mesh_to_obj(const core::Mesh& mesh);
 std::string mesh_to_json(const core::Mesh& mesh);
 

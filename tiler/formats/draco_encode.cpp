@@ -12,6 +12,7 @@
 #include "tiler/formats/draco_decode.hpp"
 #include "tiler/formats/encode.hpp"
 #include "tiler/geodesy.hpp"
+#include "tiler/json_number.hpp"
 #include "tiler/log.hpp"
 
 #include "core/error.hpp"
@@ -53,10 +54,7 @@ void check(const draco::Status& status, const char* what, const TileId& id) {
 
 // Shortest round-trip decimal form of a double (JSON numbers keep every bit).
 std::string number(double v) {
-    TB_ASSERT(std::isfinite(v));
-    char buf[32];
-    const auto r = std::to_chars(buf, buf + sizeof buf, v);
-    return std::string(buf, r.ptr);
+    return json_number(v, "a glTF number");
 }
 
 void put_u32(std::string& out, std::uint32_t v) {
