@@ -236,6 +236,23 @@ std::string glb_container(std::string json, std::string_view bin) {
     return out;
 }
 
+// Refuses a lattice step of more than a quarter of the ground distance between neighbouring
+// samples (east-west at the tile's middle latitude, the smaller one): snapping would then move
+// vertices across their neighbours, and clients would draw the tile sheared, folded or as a
+// sliver (a tile only metres wide near a pole, asked for at a large eps).
+void check_lattice_fits(const TileRaster& raster, const ErrorBudget& budget) {
+    constexpr double kPi = 3.14159265358979323846;
+    const double middle = (raster.bounds.south + raster.bounds.north) / 2;
+    const double spacing = sample_spacing_m(raster.scheme, raster.id.z, raster.size) *
+                           std::min(1.0, std::cos(middle * kPi / 180));
+    if (budget.quant_step > spacing / 4) {
+        throw InputError("tile " + tile_name(raster.id) + ": eps " + number(budget.eps) +
+                         " m gives a quantization step of " + number(budget.quant_step) +
+                         " m, more than a quarter of the tile's sample spacing (" +
+                         number(spacing) + " m here); use a smaller eps for this tile");
+    }
+}
+
 } // namespace
 
 ErrorBudget error_budget(double eps) {
@@ -302,6 +319,7 @@ std::string encode_tile(const TileRaster& raster,
     TB_ASSERT(n >= 3 && mesh.z.size() == n && mesh.triangles.size() % 3 == 0);
     TB_ASSERT(!mesh.triangles.empty());
     TB_ASSERT(budget.quant_step > 0 && budget.eps > 0);
+    check_lattice_fits(raster, budget);
     const double s = budget.quant_step;
 
     // Exact positions (double): lon/lat from the tile grid, height from the mesh.
