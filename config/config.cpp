@@ -8,6 +8,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <arpa/inet.h>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -27,6 +28,7 @@ constexpr int kMaxQueueLimit = 100000;
 constexpr int kMinTileSize = 2;
 constexpr int kMaxTileSize = 4096;
 constexpr double kMinEps = 0.001; // as tiler::check_eps
+constexpr int kMaxNesting = 64;
 
 // A short rendering of a JSON value for "got ..." in messages.
 std::string show(const json& value) {
@@ -114,10 +116,15 @@ struct Checker {
         return value.get<double>();
     }
 
+    // A string without NUL bytes (a path or name would be cut off at one).
     std::optional<std::string> string(const json& value, const std::string& pointer) {
         if (!value.is_string()) {
             error(pointer,
                   std::string("expected a string, got ") + kind(value) + " " + show(value));
+            return std::nullopt;
+        }
+        if (value.get<std::string>().find('\0') != std::string::npos) {
+            error(pointer, "contains a NUL byte (\\u0000), got " + show(value) + "; remove it");
             return std::nullopt;
         }
         return value.get<std::string>();
@@ -189,8 +196,8 @@ void parse_server(Checker& check, const json& value, ServerConfig& out) {
         {"host", "port", "threads", "cache_mb", "cors_origins", "log_level", "queue_limit"});
     if (value.contains("host")) {
         if (auto s = check.string(value["host"], at + "/host")) {
-            if (s->empty()) {
-                check.error(at + "/host", "expected a host name or address, got \"\"");
+            if (const auto problem = host_problem(*s)) {
+                check.error(at + "/host", *problem);
             } else {
                 out.host = *s;
             }
@@ -269,7 +276,8 @@ void parse_layer(Checker& check,
                       "formats",
                       "store",
                       "dem_tile_size",
-                      "dem_heights"});
+                      "dem_heights",
+                      "nodata"});
     tiler::LayerOptions& o = out.options;
 
     if (!value.contains("name")) {
@@ -403,6 +411,16 @@ void parse_layer(Checker& check,
                 *s == "ellipsoid" ? tiler::DemHeights::Ellipsoid : tiler::DemHeights::SeaLevel;
         }
     }
+    if (value.contains("nodata") && !value["nodata"].is_null()) {
+        const json& v = value["nodata"];
+        if (!v.is_number() || !std::isfinite(v.get<double>())) {
+            check.error(at + "/nodata",
+                        "expected null or the raw sample value of voids (a number), got " +
+                            show(v));
+        } else {
+            o.nodata = v.get<double>();
+        }
+    }
     if (value.contains("store") && !value["store"].is_null()) {
         const std::string p = at + "/store";
         if (!value["store"].is_string()) {
@@ -412,6 +430,8 @@ void parse_layer(Checker& check,
                             show(value["store"]));
         } else if (value["store"].get<std::string>().empty()) {
             check.error(p, "expected null or a path, got \"\"");
+        } else if (!check.string(value["store"], p)) {
+            // a NUL byte, reported
         } else {
             const std::string path = resolve(base_dir, value["store"].get<std::string>());
             const fs::path parent = fs::path(path).parent_path();
@@ -427,7 +447,84 @@ void parse_layer(Checker& check,
     }
 }
 
+// Refuses arrays and objects nested deeper than any config needs, before parsing: a value
+// nested 100,000 deep would exhaust the stack of everything that walks it recursively.
+void check_nesting(const std::string& text, const std::string& path) {
+    int depth = 0, line = 1;
+    bool in_string = false, escaped = false;
+    for (char c : text) {
+        if (c == '\n') {
+            ++line;
+        }
+        if (in_string) {
+            if (escaped) {
+                escaped = false;
+            } else if (c == '\\') {
+                escaped = true;
+            } else if (c == '"') {
+                in_string = false;
+            }
+            continue;
+        }
+        if (c == '"') {
+            in_string = true;
+        } else if (c == '[' || c == '{') {
+            if (++depth > kMaxNesting) {
+                throw InputError(path + ": line " + std::to_string(line) +
+                                 ": arrays and objects nested more than " +
+                                 std::to_string(kMaxNesting) +
+                                 " deep; a config nests 4 levels at most, fix the file");
+            }
+        } else if (c == ']' || c == '}') {
+            --depth;
+        }
+    }
+}
+
 } // namespace
+
+std::optional<std::string> host_problem(const std::string& host) {
+    const std::string got = " got \"" + host.substr(0, 80) + "\"";
+    if (host.empty()) {
+        return "expected a host name or address, got \"\"";
+    }
+    unsigned char buffer[sizeof(in6_addr)];
+    if (host.find(':') != std::string::npos) {
+        if (inet_pton(AF_INET6, host.c_str(), buffer) != 1) {
+            return "expected an IPv6 address such as \"::1\" (it holds ':');" + got;
+        }
+        return std::nullopt;
+    }
+    if (host.find_first_not_of("0123456789.") == std::string::npos) {
+        if (inet_pton(AF_INET, host.c_str(), buffer) != 1) {
+            return "expected an IPv4 address: four numbers 0..255 joined by '.', such as "
+                   "\"127.0.0.1\";" +
+                   got;
+        }
+        return std::nullopt;
+    }
+    bool ok = host.size() <= 253;
+    std::size_t start = 0;
+    while (ok && start <= host.size()) {
+        std::size_t end = host.find('.', start);
+        if (end == std::string::npos) {
+            end = host.size();
+        }
+        const std::string label = host.substr(start, end - start);
+        ok = !label.empty() && label.size() <= 63 && label.front() != '-' && label.back() != '-';
+        for (char c : label) {
+            ok = ok && ((c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') ||
+                        (c >= '0' && c <= '9') || c == '-');
+        }
+        start = end + 1;
+    }
+    if (!ok) {
+        return "expected a host name (letters, digits and '-' in '.'-separated parts) or an IP "
+               "address;" +
+               got;
+    }
+    return std::nullopt;
+}
 
 bool is_valid_layer_name(const std::string& name) {
     if (name.empty() || name.size() > 64) {
@@ -471,6 +568,7 @@ std::string layer_name_from_path(const std::string& path) {
 
 Config parse_config(const std::string& text, const std::string& path) {
     Checker check{path, {}};
+    check_nesting(text, path);
     json root;
     try {
         root = json::parse(text);

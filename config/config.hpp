@@ -50,6 +50,11 @@ Config load_config(const std::string& path);
 // "N57E011", "my dem (v2).tif" -> "my_dem_v2". Never empty.
 std::string layer_name_from_path(const std::string& path);
 
+// What is wrong with a host to listen on, or nullopt when it is usable: an IPv4 address (four
+// numbers 0..255), an IPv6 address, or a host name (letters, digits and '-' in '.'-separated
+// parts of 1..63 characters). The text reads after "host: ".
+std::optional<std::string> host_problem(const std::string& host);
+
 // True when `name` is a valid layer name: 1..64 characters of [A-Za-z0-9_-].
 bool is_valid_layer_name(const std::string& name);
 

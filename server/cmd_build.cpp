@@ -124,6 +124,9 @@ int run(const Args& args) {
     if (args.has("eps-finest")) {
         o.layer.finest_eps = args.get_double("eps-finest", 0);
     }
+    if (args.has("nodata")) {
+        o.layer.nodata = args.get_double("nodata", 0);
+    }
     if (auto v = args.get("bbox")) {
         o.bbox = parse_bbox(*v);
     }
@@ -213,6 +216,7 @@ const Command& build_command() {
               "mapbox are PNG DEM tiles (EPSG:3857 XYZ) under OUT/{layer}/dem/"},
              {"dem-size", "P", "DEM tiles are P x P pixels, 256 or 512 (default 512)"},
              {"dem-heights", "H", "DEM tile heights: sea_level (default) or ellipsoid"},
+             {"nodata", "V", "raw sample value to treat as nodata, replacing the file's own"},
              {"threads", "N", "worker threads (default: one per core)"},
              {"resume", "", "continue a build: same parameters, tiles already there are kept"},
              {"force", "", "delete the layer's existing tiles and documents first"},

@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <optional>
 #include <sstream>
 
 namespace tb::cli {
@@ -41,6 +42,12 @@ std::string describe(const tiler::DemInfo& d) {
             << (d.range_exact ? "\n" : " (approximate: too large to read whole)\n");
     } else {
         out << "no valid sample (every sample is nodata)\n";
+    }
+    if (d.likely_nodata && !d.nodata_given) {
+        out << "  warning:     " << 100 * d.likely_nodata_share << "% of the samples are "
+            << *d.likely_nodata << ", far from all the others (" << d.others_min << " .. "
+            << d.others_max << "): likely voids not declared as nodata; pass --nodata "
+            << *d.likely_nodata << "\n";
     }
     if (d.has_geotransform) {
         const auto& g = d.geotransform;
@@ -83,7 +90,8 @@ std::string describe_read(const tiler::ReadLevel& level) {
 
 // The pyramid a layer of this DEM would have: zooms, tiles per zoom, eps per zoom, and what
 // each zoom reads of the source.
-std::string describe_pyramid(const std::string& path, tiler::Scheme scheme) {
+std::string
+describe_pyramid(const std::string& path, tiler::Scheme scheme, std::optional<double> nodata) {
     std::ostringstream out;
     out.precision(6);
     std::shared_ptr<const tiler::Layer> layer;
@@ -91,6 +99,7 @@ std::string describe_pyramid(const std::string& path, tiler::Scheme scheme) {
         tiler::LayerOptions options;
         options.sources = {path};
         options.scheme = scheme;
+        options.nodata = nodata;
         layer = tiler::Layer::open(options);
     } catch (const InputError& e) {
         out << "  pyramid:     none (" << e.what() << ")\n";
@@ -139,9 +148,14 @@ int run(const Args& args) {
         throw InputError("info: name a DEM file; see 'terrabound info --help'");
     }
     const tiler::Scheme scheme = tiler::parse_scheme(args.get("scheme").value_or("geodetic"));
+    std::optional<double> nodata;
+    if (args.has("nodata")) {
+        nodata = args.get_double("nodata", 0);
+    }
     for (const auto& path : args.positional) {
-        std::fputs(describe(tiler::inspect_dem(path)).c_str(), stdout);
-        std::fputs(describe_pyramid(path, scheme).c_str(), stdout);
+        std::fputs(describe(tiler::inspect_dem(path, tiler::kExactRangeSamples, nodata)).c_str(),
+                   stdout);
+        std::fputs(describe_pyramid(path, scheme, nodata).c_str(), stdout);
     }
     return 0;
 }
@@ -153,7 +167,8 @@ const Command& info_command() {
         {"info",
          "DEM...",
          "Describe a DEM: size, CRS, data type, nodata, height range, resolution, pyramid.",
-         {{"scheme", "NAME", "pyramid plan for geodetic (default) or mercator tiles"}},
+         {{"scheme", "NAME", "pyramid plan for geodetic (default) or mercator tiles"},
+          {"nodata", "V", "raw sample value to treat as nodata, replacing the file's own"}},
          "The pyramid plan is what 'terrabound build' and 'serve' make of the DEM alone with\n"
          "default options: zoom range, tiles per zoom, each zoom's eps (metres), how that eps\n"
          "is made true at the DEM's own pixels (the guarantee), and what its tiles read: the\n"

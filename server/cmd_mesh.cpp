@@ -2,13 +2,15 @@
 #include "core/error.hpp"
 #include "core/triangulate.hpp"
 #include "server/commands.hpp"
-#include "tiler/sources/gdal_source.hpp"
+#include "tiler/json_number.hpp"
 #include "tiler/layer.hpp"
+#include "tiler/sources/gdal_source.hpp"
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <optional>
 #include <string>
 
 namespace tb::cli {
@@ -32,7 +34,11 @@ int run(const Args& args) {
         throw InputError("mesh: -o " + *out + ": unknown output type; use .obj or .json");
     }
     const auto start = std::chrono::steady_clock::now();
-    const core::HeightGrid grid = tiler::DemSource::open({input})->read_all();
+    std::optional<double> nodata;
+    if (args.has("nodata")) {
+        nodata = args.get_double("nodata", 0);
+    }
+    const core::HeightGrid grid = tiler::DemSource::open({input}, nodata)->read_all();
     if (grid.width < 2 || grid.height < 2) {
         throw InputError(input + ": " + std::to_string(grid.width) + " x " +
                          std::to_string(grid.height) + " samples; meshing needs at least 2 x 2");
@@ -56,15 +62,15 @@ int run(const Args& args) {
     tiler::write_file_atomically(
         *out, ext == "obj" ? tiler::mesh_to_obj(mesh) : tiler::mesh_to_json(mesh));
     if (args.has("stats")) {
-        std::printf("{\"width\":%d,\"height\":%d,\"eps\":%.17g,\"vertices\":%zu,\"triangles\":%zu,"
-                    "\"max_error\":%.17g,\"seconds\":%.6f}\n",
+        std::printf("{\"width\":%d,\"height\":%d,\"eps\":%s,\"vertices\":%zu,\"triangles\":%zu,"
+                    "\"max_error\":%s,\"seconds\":%s}\n",
                     grid.width,
                     grid.height,
-                    eps,
+                    tiler::json_number(eps, "eps").c_str(),
                     mesh.points.size(),
                     mesh.triangle_count(),
-                    core::max_error(mesh, grid),
-                    seconds);
+                    tiler::json_number(core::max_error(mesh, grid), "max_error").c_str(),
+                    tiler::json_number(seconds, "seconds").c_str());
     }
     return 0;
 }
@@ -84,6 +90,7 @@ const Command& mesh_command() {
               "print one JSON line: width, height, eps, vertices, triangles, "
               "max_error, seconds"},
              {"no-lock-border", "", "let the border be simplified like the interior"},
+             {"nodata", "V", "raw sample value to treat as nodata, replacing the file's own"},
          },
          "Band 1 is meshed in grid coordinates (x = column, y = row, row 0 first); nodata\n"
          "samples constrain nothing and are filled from their surroundings. No georeferencing\n"

@@ -151,6 +151,9 @@ int run(const Args& args) {
         cfg = config_from_dems(args.positional);
     }
     if (auto host = args.get("host")) {
+        if (const auto problem = config::host_problem(*host)) {
+            throw InputError("--host: " + *problem);
+        }
         cfg.server.host = *host;
     }
     if (args.has("port")) {
@@ -172,6 +175,12 @@ int run(const Args& args) {
     if (auto store = args.get("store")) {
         for (auto& layer : cfg.layers) {
             layer.store = *store;
+        }
+    }
+    if (args.has("nodata")) {
+        const double nodata = args.get_double("nodata", 0);
+        for (auto& layer : cfg.layers) {
+            layer.options.nodata = nodata;
         }
     }
     log::Level level = log::Level::Info;
@@ -250,6 +259,7 @@ const Command& serve_command() {
           {"port", "PORT", "port to listen on (default 8080; 0 picks a free port)"},
           {"threads", "N", "tile generation threads (default: one per core)"},
           {"web", "DIR", "the viewer's directory (default: web/ of this checkout; 'none': off)"},
+          {"nodata", "V", "raw sample value every layer treats as nodata (the config's nodata)"},
           {"store",
            "PATH",
            "keep generated tiles in this store for every layer: a directory, or a file "

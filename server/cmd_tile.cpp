@@ -47,6 +47,9 @@ int run(const Args& args) {
     }
     options.tile_size = static_cast<int>(size);
     options.datum = tiler::parse_datum(args.get("datum").value_or("auto"));
+    if (args.has("nodata")) {
+        options.nodata = args.get_double("nodata", 0);
+    }
     const auto layer = tiler::Layer::open(options);
     const double eps = args.has("eps") ? args.get_double("eps", 0) : layer->eps_for_zoom(id.z);
     tiler::check_eps(eps, "tile: --eps");
@@ -111,6 +114,7 @@ const Command& tile_command() {
              {"eps", "E", "vertical error bound in metres (default: the zoom's ladder eps)"},
              {"size", "N", "tile raster of (N+1) x (N+1) samples (default 256)"},
              {"datum", "NAME", "source heights: auto (default), egm96 or ellipsoid"},
+             {"nodata", "V", "raw sample value to treat as nodata, replacing the file's own"},
          },
          "Outputs: .glb (glTF + Draco, ECEF), .drc (Draco, local ENU), .obj (the mesh in the\n"
          "grid coordinates of the samples it was meshed on: v column row height, heights above\n"

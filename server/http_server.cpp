@@ -4,6 +4,7 @@
 
 #include "core/error.hpp"
 #include "tiler/dem_tiles.hpp"
+#include "tiler/json_number.hpp"
 #include "tiler/log.hpp"
 #include "tiler/tile_grid.hpp"
 
@@ -100,9 +101,7 @@ std::string html_escape(std::string_view text) {
 }
 
 std::string number(double v) {
-    char buf[32];
-    const auto r = std::to_chars(buf, buf + sizeof buf, v);
-    return std::string(buf, r.ptr);
+    return tiler::json_number(v, "a layer-list number");
 }
 
 const char* reason(int status) {

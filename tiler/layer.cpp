@@ -48,7 +48,7 @@ class DemLayer final : public Layer {
 public:
     explicit DemLayer(const LayerOptions& options) : options_(options) {
         validate_options();
-        source_ = DemSource::open(options_.sources);
+        source_ = DemSource::open(options_.sources, options_.nodata);
         const DemInfo& info = source_->info();
         if (!source_->georeferenced()) {
             throw InputError(info.path + ": has no georeferencing; tiles need a CRS and a "
@@ -501,7 +501,7 @@ std::string mesh_to_obj(const core::Mesh& mesh) {
     for (std::size_t v = 0; v < mesh.points.size(); ++v) {
         std::snprintf(line,
                       sizeof line,
-                      "v %d %d %.9g\n",
+                      "v %d %d %.17g\n",
                       mesh.points[v].x,
                       mesh.points[v].y,
                       static_cast<double>(mesh.z[v]));
@@ -525,7 +525,7 @@ std::string mesh_to_json(const core::Mesh& mesh) {
     for (std::size_t v = 0; v < mesh.points.size(); ++v) {
         std::snprintf(number,
                       sizeof number,
-                      "%s%d,%d,%.9g",
+                      "%s%d,%d,%.17g",
                       v ? "," : "",
                       mesh.points[v].x,
                       mesh.points[v].y,

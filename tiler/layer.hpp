@@ -44,6 +44,7 @@ struct LayerOptions {
     VerticalDatum datum = VerticalDatum::Auto;
     int dem_tile_size = 512; // raster DEM tiles: pixels per side, 256 or 512
     DemHeights dem_heights = DemHeights::SeaLevel;
+    std::optional<double> nodata; // raw nodata value replacing the sources' own (--nodata)
 };
 
 // How a layer makes its published error true at every valid pixel of the source.
@@ -138,8 +139,9 @@ void check_eps(double eps, const std::string& what);
 core::Mesh mesh_tile(const TileRaster& raster, const ErrorBudget& budget);
 
 // A mesh in grid coordinates as text: OBJ ("v column row height", 1-based "f i j k") or JSON
-// ({"vertices":[x,y,z,...],"triangles":[i,j,k,...]}, 0-based), heights with 9 significant
-// digits (float32 round trip). The formats shared/bench's linf_check reads.
+// ({"vertices":[x,y,z,...],"triangles":[i,j,k,...]}, 0-based), heights as the float the mesher
+// used, widened to double and written with 17 significant digits, so a reader parsing doubles
+// gets exactly that float's value. The formats shared/bench's linf_check reads.
 std::string mesh_to_obj(const core::Mesh& mesh);
 std::string mesh_to_json(const core::Mesh& mesh);
 

@@ -400,6 +400,11 @@ TEST_CASE("shards 0/2 and 1/2 then --finalize give the unsharded build") {
     CHECK(sharded.erase("terrain/build-shards/1-of-2.json") == 1);
     CHECK(sharded.erase("terrain/build-manifest.json") == 1);
     CHECK(whole.erase("terrain/build-manifest.json") == 1);
+    // ... and the checksum files of those.
+    CHECK(sharded.erase("terrain/build-shards/.0-of-2.json.crc32") == 1);
+    CHECK(sharded.erase("terrain/build-shards/.1-of-2.json.crc32") == 1);
+    CHECK(sharded.erase("terrain/.build-manifest.json.crc32") == 1);
+    CHECK(whole.erase("terrain/.build-manifest.json.crc32") == 1);
     CHECK(whole.size() > 10);
     CHECK((whole == sharded));
 }
@@ -674,4 +679,100 @@ TEST_CASE("a build of DEM tiles alone writes no tileset and no mesh tile") {
         run(args(dem, dir / "other", {"--formats", "terrarium", "--dem-size", "300"}), dir);
     CHECK(size.code == 2);
     CHECK(size.err.find("--dem-size 300: expected 256 or 512") != std::string::npos);
+}
+
+TEST_CASE("build --resume re-makes every damaged tile (0 bytes, truncated, garbage, a flipped "
+          "byte) in both stores") {
+    BuildDir dir;
+    const auto dem = write_dem(dir / "dem.tif");
+    const std::vector<std::string> damage_names = {"0 bytes", "truncated", "garbage", "flipped"};
+    const auto damage = [](const std::string& good, std::size_t kind) {
+        switch (kind) {
+        case 0:
+            return std::string();
+        case 1:
+            return good.substr(0, good.size() / 2);
+        case 2:
+            return std::string(good.size(), '\x5a');
+        default: {
+            std::string t = good;
+            t[t.size() / 3] = static_cast<char>(t[t.size() / 3] ^ 0x20);
+            return t;
+        }
+        }
+    };
+
+    // Directory store.
+    REQUIRE(run(args(dem, dir / "out"), dir).code == 0);
+    const auto clean = tree(dir.path / "out");
+    std::vector<fs::path> tiles;
+    for (const auto& [name, bytes] : clean) {
+        if (fs::path(name).extension() == ".glb") {
+            tiles.push_back(dir.path / "out" / name);
+        }
+    }
+    REQUIRE(tiles.size() > damage_names.size());
+    for (std::size_t k = 0; k < damage_names.size(); ++k) {
+        std::ofstream(tiles[k], std::ios::binary | std::ios::trunc) << damage(slurp(tiles[k]), k);
+    }
+    const Run resumed = run(args(dem, dir / "out", {"--resume", "--json"}), dir);
+    INFO(resumed.err);
+    REQUIRE(resumed.code == 0);
+    CHECK(resumed.out.find("\"written\":4") != std::string::npos);
+    CHECK(resumed.err.find("damaged") != std::string::npos);
+    CHECK((tree(dir.path / "out") == clean));
+
+    // SQLite store.
+    const std::string db_path = dir / "out.sqlite";
+    REQUIRE(run(args(dem, db_path), dir).code == 0);
+    const auto clean_rows = sqlite_tiles(db_path);
+    {
+        sqlite3* db = nullptr;
+        REQUIRE(sqlite3_open(db_path.c_str(), &db) == SQLITE_OK);
+        sqlite3_stmt* rows = nullptr;
+        REQUIRE(
+            sqlite3_prepare_v2(
+                db, "SELECT rowid, data FROM tiles ORDER BY rowid LIMIT 4", -1, &rows, nullptr) ==
+            SQLITE_OK);
+        std::vector<std::pair<sqlite3_int64, std::string>> picked;
+        while (sqlite3_step(rows) == SQLITE_ROW) {
+            const auto* data = static_cast<const char*>(sqlite3_column_blob(rows, 1));
+            picked.emplace_back(sqlite3_column_int64(rows, 0),
+                                std::string(data, sqlite3_column_bytes(rows, 1)));
+        }
+        sqlite3_finalize(rows);
+        REQUIRE(picked.size() == 4);
+        for (std::size_t k = 0; k < picked.size(); ++k) {
+            sqlite3_stmt* update = nullptr;
+            REQUIRE(sqlite3_prepare_v2(
+                        db, "UPDATE tiles SET data=?1 WHERE rowid=?2", -1, &update, nullptr) ==
+                    SQLITE_OK);
+            const std::string bad = damage(picked[k].second, k);
+            sqlite3_bind_blob(
+                update, 1, bad.data(), static_cast<int>(bad.size()), SQLITE_TRANSIENT);
+            sqlite3_bind_int64(update, 2, picked[k].first);
+            CHECK(sqlite3_step(update) == SQLITE_DONE);
+            sqlite3_finalize(update);
+        }
+        sqlite3_close(db);
+    }
+    REQUIRE(sqlite_tiles(db_path) != clean_rows);
+    const Run resumed_db = run(args(dem, db_path, {"--resume", "--json"}), dir);
+    INFO(resumed_db.err);
+    REQUIRE(resumed_db.code == 0);
+    CHECK(resumed_db.out.find("\"written\":4") != std::string::npos);
+    CHECK((sqlite_tiles(db_path) == clean_rows));
+}
+
+TEST_CASE("build -o under a directory that does not exist fails with exit 3 and creates nothing") {
+    BuildDir dir;
+    const auto dem = write_dem(dir / "dem.tif");
+    for (const std::string out : {"missing/dir/out", "missing/dir/out.sqlite"}) {
+        CAPTURE(out);
+        const Run r = run(args(dem, dir / out), dir);
+        CHECK(r.code == 3);
+        CHECK(r.err.find((dir.path / "missing/dir").string() +
+                         " does not exist; create it first") != std::string::npos);
+        CHECK_FALSE(fs::exists(dir.path / "missing"));
+    }
 }

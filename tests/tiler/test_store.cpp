@@ -177,6 +177,7 @@ TEST_CASE("the directory store round-trips tiles and documents byte-exact") {
 TEST_CASE("the SQLite store round-trips tiles and documents byte-exact and keeps them on reopen") {
     TempDir dir;
     const auto path = (dir.path / "sub/tiles.sqlite").string();
+    fs::create_directories(dir.path / "sub");
     {
         auto store = TileStore::open(path);
         CHECK(store->describe() == "sqlite " + path);

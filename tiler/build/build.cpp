@@ -6,6 +6,7 @@
 
 #include "core/error.hpp"
 #include "tiler/dem_tiles.hpp"
+#include "tiler/json_number.hpp"
 #include "tiler/log.hpp"
 #include "tiler/stores/store.hpp"
 
@@ -63,12 +64,6 @@ std::string json_string(std::string_view s) {
         }
     }
     return out + "\"";
-}
-
-std::string json_number(double v) {
-    char buf[32];
-    const auto r = std::to_chars(buf, buf + sizeof buf, v);
-    return std::string(buf, r.ptr);
 }
 
 // ---- the manifest: one "key": value per line, in a fixed order, no timestamps (so that

@@ -12,6 +12,7 @@
 #include "tiler/formats/draco_decode.hpp"
 #include "tiler/formats/encode.hpp"
 #include "tiler/geodesy.hpp"
+#include "tiler/json_number.hpp"
 #include "tiler/log.hpp"
 
 #include "core/error.hpp"
@@ -53,10 +54,7 @@ void check(const draco::Status& status, const char* what, const TileId& id) {
 
 // Shortest round-trip decimal form of a double (JSON numbers keep every bit).
 std::string number(double v) {
-    TB_ASSERT(std::isfinite(v));
-    char buf[32];
-    const auto r = std::to_chars(buf, buf + sizeof buf, v);
-    return std::string(buf, r.ptr);
+    return json_number(v, "a glTF number");
 }
 
 void put_u32(std::string& out, std::uint32_t v) {
@@ -344,6 +342,30 @@ std::string empty_tile(const TileRaster& raster, Format format, const ErrorBudge
     return out + json;
 }
 
+// Refuses a lattice step of more than a quarter of the ground distance between neighbouring
+// samples (east-west at the tile's middle latitude, the smaller one): snapping would then move
+// vertices across their neighbours, and clients would draw the tile sheared, folded or as a
+// sliver (a tile only metres wide near a pole, asked for at a large eps).
+void check_lattice_fits(const TileRaster& raster, const ErrorBudget& budget) {
+    constexpr double kPi = 3.14159265358979323846;
+    const double middle = (raster.bounds.south + raster.bounds.north) / 2;
+    const double shrink = std::min(1.0, std::cos(middle * kPi / 180));
+    // Lattice tiles: the zoom's sample spacing; pixel tiles: the pixels' own.
+    const GridFrame f = frame_of(raster);
+    const bool degrees = f.lonlat || raster.scheme == Scheme::Geodetic;
+    const double spacing =
+        raster.frame.dx > 0
+            ? (degrees ? std::min(f.dx * shrink, f.dy) * kPi / 180 * 6378137.0
+                       : std::min(f.dx, f.dy) * shrink)
+            : sample_spacing_m(raster.scheme, raster.id.z, raster.size) * shrink;
+    if (budget.quant_step > spacing / 4) {
+        throw InputError("tile " + tile_name(raster.id) + ": eps " + number(budget.eps) +
+                         " m gives a quantization step of " + number(budget.quant_step) +
+                         " m, more than a quarter of the tile's sample spacing (" +
+                         number(spacing) + " m here); use a smaller eps for this tile");
+    }
+}
+
 } // namespace
 
 ErrorBudget error_budget(double eps) {
@@ -430,6 +452,7 @@ std::string encode_tile(const TileRaster& raster,
     }
     TB_ASSERT(n >= 3);
     TB_ASSERT(budget.quant_step > 0 && budget.eps > 0);
+    check_lattice_fits(raster, budget);
     const double s = budget.quant_step;
 
     // Exact positions (double): lon/lat from the tile grid, height from the mesh.

@@ -16,6 +16,7 @@
 // tiles; its error is twice its largest child's, the tileset's twice the root's.
 #include "tiler/formats/encode.hpp"
 #include "tiler/geodesy.hpp"
+#include "tiler/json_number.hpp"
 
 #include "core/error.hpp"
 
@@ -32,10 +33,7 @@ constexpr double kPi = 3.14159265358979323846;
 constexpr double kMinRadius = 6335439.0; // b^2/a of WGS84, metres: smallest curvature radius
 
 std::string number(double v) {
-    TB_ASSERT(std::isfinite(v));
-    char buf[32];
-    const auto r = std::to_chars(buf, buf + sizeof buf, v);
-    return std::string(buf, r.ptr);
+    return json_number(v, "a tileset number");
 }
 
 std::string tile_path(const TileId& id) {

@@ -250,7 +250,15 @@ private:
         }
         // The hull of the pixel centres, densified so projected outlines bound the data.
         const auto& g = info_.geotransform;
-        const double u0 = 0.5, u1 = info_.width - 0.5, v0 = 0.5, v1 = info_.height - 0.5;
+        double u0 = 0.5, u1 = info_.width - 0.5, v0 = 0.5, v1 = info_.height - 0.5;
+        // One column or one row has no area between its centres; take the pixels' own extent
+        // then (sample() reads up to half a pixel beyond the centres), so it meets tiles.
+        if (info_.width == 1) {
+            u0 = 0, u1 = 1;
+        }
+        if (info_.height == 1) {
+            v0 = 0, v1 = 1;
+        }
         constexpr int kSteps = 64;
         double west = INFINITY, south = INFINITY, east = -INFINITY, north = -INFINITY;
         for (int i = 0; i <= kSteps; ++i) {
@@ -317,21 +325,10 @@ private:
         return PixelGrid{g[0], g[3], g[1], -g[5], info_.width, info_.height, true};
     }
 
-    // Height of a raw sample, or NaN for nodata.
+    // Height of a raw sample, or NaN for nodata (tiler::to_height decides).
     double to_height(double raw) const {
-        if (!std::isfinite(raw)) {
-            return NAN;
-        }
-        if (info_.nodata) {
-            const double nd = *info_.nodata;
-            if (raw == nd) {
-                return NAN;
-            }
-            if (data_type_ == GDT_Float32 && static_cast<float>(raw) == static_cast<float>(nd)) {
-                return NAN;
-            }
-        }
-        return raw * info_.scale + info_.offset;
+        return tiler::to_height(
+            raw, info_.nodata, data_type_ == GDT_Float32, info_.scale, info_.offset);
     }
 
     std::string open_name_;
@@ -678,16 +675,60 @@ core::HeightGrid GdalDemSource::read_all() const {
     return grid;
 }
 
+// Refuses a DEM whose extreme value looks like undeclared voids, naming the fix.
+void check_likely_nodata(const DemInfo& info) {
+    if (!info.likely_nodata || info.nodata_given) {
+        return;
+    }
+    char text[512];
+    std::snprintf(text,
+                  sizeof text,
+                  ": %.3g%% of band 1's samples are %.17g, far from all the others (%.10g .. "
+                  "%.10g m), which looks like voids not declared as nodata; pass --nodata %.17g "
+                  "(config: \"nodata\": %.17g), or --nodata with a value the file does not "
+                  "hold to keep them as heights",
+                  100 * info.likely_nodata_share,
+                  *info.likely_nodata,
+                  info.others_min,
+                  info.others_max,
+                  *info.likely_nodata,
+                  *info.likely_nodata);
+    throw InputError(info.path + text);
+}
+
 } // namespace
 
-std::shared_ptr<const DemSource> DemSource::open(const std::vector<std::string>& paths) {
+double to_height(
+    double raw, const std::optional<double>& nodata, bool float32, double scale, double offset) {
+    if (!std::isfinite(raw)) {
+        return NAN;
+    }
+    if (nodata) {
+        const double nd = *nodata;
+        if (raw == nd) {
+            return NAN;
+        }
+        if (float32 && static_cast<float>(raw) == static_cast<float>(nd)) {
+            return NAN;
+        }
+    }
+    return raw * scale + offset;
+}
+
+std::shared_ptr<const DemSource> DemSource::open(const std::vector<std::string>& paths,
+                                                 std::optional<double> nodata) {
     init_gdal();
     if (paths.empty()) {
         throw InputError("no DEM given; name at least one raster file");
     }
+    if (nodata && !std::isfinite(*nodata)) {
+        throw InputError("--nodata: expected a finite number (NaN and infinite samples are "
+                         "always nodata)");
+    }
     std::vector<DemInfo> infos;
     for (const auto& path : paths) {
-        infos.push_back(inspect_dem(path)); // InputError for missing/unreadable files
+        infos.push_back(inspect_dem(path, kExactRangeSamples, nodata));
+        check_likely_nodata(infos.back());
         GDALDatasetUniquePtr ds(GDALDataset::Open(
             path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY, nullptr, nullptr, nullptr));
         if (!ds) {
@@ -722,6 +763,14 @@ std::shared_ptr<const DemSource> DemSource::open(const std::vector<std::string>&
     }
     CslPtr argv(CSLAddString(nullptr, "-b"));
     argv.reset(CSLAddString(argv.release(), "1"));
+    if (nodata) {
+        char value[32];
+        std::snprintf(value, sizeof value, "%.17g", *nodata);
+        for (const char* option : {"-srcnodata", "-vrtnodata"}) {
+            argv.reset(CSLAddString(argv.release(), option));
+            argv.reset(CSLAddString(argv.release(), value));
+        }
+    }
     std::unique_ptr<GDALBuildVRTOptions, BuildVrtOptionsDeleter> options(
         GDALBuildVRTOptionsNew(argv.get(), nullptr));
     std::vector<const char*> sources;
@@ -744,8 +793,9 @@ std::shared_ptr<const DemSource> DemSource::open(const std::vector<std::string>&
         throw IoError(names + ": GDAL gave no VRT description of the mosaic");
     }
     const std::string open_name = xml[0];
-    DemInfo info = inspect_dem(open_name);
+    DemInfo info = inspect_dem(open_name, kExactRangeSamples, nodata);
     info.path = names;
+    check_likely_nodata(info);
     return std::make_shared<GdalDemSource>(open_name, std::move(info));
 }
 

@@ -8,9 +8,15 @@
 #include <gdal_priv.h>
 #include <ogr_spatialref.h>
 
+#include <algorithm>
+#include <cerrno>
 #include <cmath>
+#include <cstring>
+#include <fcntl.h>
 #include <filesystem>
 #include <mutex>
+#include <unistd.h>
+#include <vector>
 
 namespace tb::tiler {
 namespace {
@@ -28,6 +34,132 @@ std::string last_gdal_error() {
     return message && *message ? message : "unknown GDAL error";
 }
 
+// Shows a path in an error message without letting control bytes into the log.
+std::string printable(const std::string& s) {
+    std::string out;
+    for (unsigned char c : s) {
+        if (c < 0x20 || c == 0x7f) {
+            static const char* hex = "0123456789abcdef";
+            out += "\\x";
+            out += hex[c >> 4];
+            out += hex[c & 15];
+        } else {
+            out += static_cast<char>(c);
+        }
+    }
+    return out;
+}
+
+// What a pass over band 1 found, in heights (to_height applied). second_min is the smallest
+// height above min (NaN when there is none), second_max the largest below max.
+struct SampleStats {
+    std::int64_t valid = 0;
+    double min = INFINITY, max = -INFINITY;
+    std::int64_t at_min = 0, at_max = 0;
+    double second_min = INFINITY, second_max = -INFINITY;
+};
+
+void add_sample(SampleStats& s, double h) {
+    ++s.valid;
+    if (h < s.min) {
+        s.second_min = s.min;
+        s.min = h, s.at_min = 1;
+    } else if (h == s.min) {
+        ++s.at_min;
+    } else if (h < s.second_min) {
+        s.second_min = h;
+    }
+    if (h > s.max) {
+        s.second_max = s.max;
+        s.max = h, s.at_max = 1;
+    } else if (h == s.max) {
+        ++s.at_max;
+    } else if (h > s.second_max) {
+        s.second_max = h;
+    }
+}
+
+// Reads band 1 (or, with `approx`, GDAL's sample overview of it, decimated to at most 16
+// Mpixel) strip by strip through to_height. A failed read is an IoError with GDAL's message:
+// truncated data, a missing VRT source, a file larger on paper than on disk.
+SampleStats scan_band(const DemInfo& info, GDALRasterBand& band, bool approx) {
+    constexpr double kApproxSamples = 4096.0 * 4096;
+    GDALRasterBand* src = &band;
+    if (approx) {
+        src = band.GetRasterSampleOverview(static_cast<GUIntBig>(kApproxSamples));
+        if (!src) {
+            src = &band;
+        }
+    }
+    const int W = src->GetXSize(), H = src->GetYSize();
+    int out_w = W, out_h = H;
+    const double pixels = static_cast<double>(W) * H;
+    if (approx && pixels > kApproxSamples) {
+        const double f = std::sqrt(pixels / kApproxSamples);
+        out_w = std::max(1, static_cast<int>(W / f));
+        out_h = std::max(1, static_cast<int>(H / f));
+    }
+    const bool float32 = band.GetRasterDataType() == GDT_Float32;
+    const int rows = std::max(1, static_cast<int>(std::min<double>(out_h, (1 << 22) / out_w)));
+    std::vector<double> buffer(static_cast<std::size_t>(out_w) * rows);
+    SampleStats stats;
+    for (int y0 = 0; y0 < out_h; y0 += rows) {
+        const int n = std::min(rows, out_h - y0);
+        const int wy0 = static_cast<int>(static_cast<std::int64_t>(y0) * H / out_h);
+        const int wy1 = static_cast<int>(static_cast<std::int64_t>(y0 + n) * H / out_h);
+        CPLErrorReset();
+        if (src->RasterIO(GF_Read,
+                          0,
+                          wy0,
+                          W,
+                          std::max(1, wy1 - wy0),
+                          buffer.data(),
+                          out_w,
+                          n,
+                          GDT_Float64,
+                          0,
+                          0,
+                          nullptr) != CE_None) {
+            throw IoError(info.path + ": read failed (" + last_gdal_error() +
+                          "); the file, or one it refers to, is damaged, truncated or missing");
+        }
+        for (std::size_t k = 0; k < static_cast<std::size_t>(out_w) * n; ++k) {
+            const double h = to_height(buffer[k], info.nodata, float32, info.scale, info.offset);
+            if (!std::isnan(h)) {
+                add_sample(stats, h);
+            }
+        }
+    }
+    return stats;
+}
+
+// Fills DemInfo::likely_nodata when the minimum or the maximum looks like undeclared voids.
+void find_likely_nodata(DemInfo& info, const SampleStats& s) {
+    const auto suspect = [&](double value, std::int64_t count, double nearest, double other_end) {
+        if (info.likely_nodata || !std::isfinite(nearest)) {
+            return;
+        }
+        const double share = static_cast<double>(count) / static_cast<double>(s.valid);
+        const double others = 1 - share;
+        const double gap = std::abs(nearest - value);
+        const double spread = std::abs(other_end - nearest);
+        const double raw = (value - info.offset) / info.scale;
+        constexpr double kFloatMax = 3.4028234663852886e38;
+        const bool marker = raw == -32768 || raw == -32767 || raw == -9999 || raw == -999 ||
+                            raw == -99999 || raw == 9999 || raw == 32767 || raw == 65535 ||
+                            std::abs(raw) == kFloatMax;
+        if (share > kLikelyNodataShare && others > kLikelyNodataShare && spread > 0 &&
+            gap > kLikelyNodataGap && gap > (marker ? 1.0 : 10.0) * spread) {
+            info.likely_nodata = raw;
+            info.likely_nodata_share = share;
+            info.others_min = std::min(nearest, other_end);
+            info.others_max = std::max(nearest, other_end);
+        }
+    };
+    suspect(s.min, s.at_min, s.second_min, s.max);
+    suspect(s.max, s.at_max, s.second_max, s.min);
+}
+
 } // namespace
 
 void init_gdal() {
@@ -40,9 +172,14 @@ void init_gdal() {
     });
 }
 
-DemInfo inspect_dem(const std::string& path, double exact_range_samples) {
+DemInfo inspect_dem(const std::string& path,
+                    double exact_range_samples,
+                    std::optional<double> nodata_override) {
     init_gdal();
     namespace fs = std::filesystem;
+    if (path.find('\0') != std::string::npos) {
+        throw InputError(printable(path) + ": the path holds a NUL byte; name the file without it");
+    }
     const bool vrt_xml = path.find('<') != std::string::npos; // a mosaic's VRT description
     const bool virtual_path = path.rfind("/vsi", 0) == 0 || vrt_xml;
     if (!virtual_path) {
@@ -54,6 +191,17 @@ DemInfo inspect_dem(const std::string& path, double exact_range_samples) {
         if (fs::is_directory(status)) {
             throw InputError(path + ": is a directory, not a raster; name a DEM file");
         }
+        // Some drivers (SRTMHGT) recognize a file by its name and crash on one they cannot
+        // read, so find out first.
+        const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
+        if (fd < 0) {
+            const int err = errno;
+            throw IoError(path + ": cannot be read (" + std::strerror(err) + ")" +
+                          (err == EACCES || err == EPERM
+                               ? "; fix its permissions (chmod a+r) or run as its owner"
+                               : "; check the file"));
+        }
+        ::close(fd);
     }
     CPLErrorReset();
     GDALDatasetUniquePtr ds(GDALDataset::Open(
@@ -74,7 +222,10 @@ DemInfo inspect_dem(const std::string& path, double exact_range_samples) {
     info.data_type = GDALGetDataTypeName(band->GetRasterDataType());
     int has = 0;
     double nodata = band->GetNoDataValue(&has);
-    if (has) {
+    if (nodata_override) {
+        info.nodata = nodata_override;
+        info.nodata_given = true;
+    } else if (has) {
         info.nodata = nodata;
     }
     info.scale = band->GetScale(&has);
@@ -162,7 +313,6 @@ DemInfo inspect_dem(const std::string& path, double exact_range_samples) {
     // Exact min/max over valid samples (metadata statistics are not trusted: some files carry
     // stale ones). Tileset bounding volumes are built from it, so an approximate range is only
     // taken where reading everything would hold up every start for long.
-    double minmax[2] = {0, 0};
     const double samples = static_cast<double>(info.width) * info.height;
     const bool approx = samples > exact_range_samples;
     info.range_exact = !approx;
@@ -171,15 +321,12 @@ DemInfo inspect_dem(const std::string& path, double exact_range_samples) {
                   std::to_string(std::llround(samples / 1e6)) +
                   " Mpixel once for the exact height range");
     }
-    CPLErrorReset();
-    if (band->ComputeRasterMinMax(approx, minmax) == CE_None) {
+    const SampleStats stats = scan_band(info, *band, approx);
+    if (stats.valid > 0) {
         info.has_data = true;
-        const double a = minmax[0] * info.scale + info.offset;
-        const double b = minmax[1] * info.scale + info.offset;
-        info.min_height = std::min(a, b);
-        info.max_height = std::max(a, b);
-    } else {
-        info.has_data = false;
+        info.min_height = stats.min;
+        info.max_height = stats.max;
+        find_likely_nodata(info, stats);
     }
     return info;
 }

@@ -30,8 +30,31 @@ struct DemInfo {
     double min_height = 0, max_height = 0; // over valid samples, after scale/offset
     bool range_exact = true; // min/max read from every sample, not GDAL's approximate pass
     std::optional<std::array<double, 4>> lonlat_bounds; // west, south, east, north (degrees)
-    double resolution_m = 0; // approximate ground size of one pixel, metres
+    double resolution_m = 0;   // approximate ground size of one pixel, metres
+    bool nodata_given = false; // nodata comes from the caller (--nodata), not from the file
+    // A raw value that looks like voids not declared as nodata (see kLikelyNodataShare), the
+    // share of valid samples holding it, and the height range of the others.
+    std::optional<double> likely_nodata;
+    double likely_nodata_share = 0;
+    double others_min = 0, others_max = 0;
 };
+
+// An extreme value (the minimum or the maximum) of the valid samples is taken for undeclared
+// voids when it holds more than this share of them, the other samples (more than one value)
+// hold more than this share too, and it lies further than kLikelyNodataGap
+// from the nearest other value, and that gap is wider than the spread of all the other values
+// for a usual void marker (-32768, -32767, -9999, -999, -99999, 9999, 32767, 65535, the
+// float32 limits), or ten times wider for any other value: -32767 or -9999 holes in 0 .. 3000 m
+// terrain, say, but not a sea at 0 m next to land at 1 m, nor a flat plateau above hills.
+inline constexpr double kLikelyNodataShare = 0.005;
+inline constexpr double kLikelyNodataGap = 500;
+
+// The height of a raw sample of band 1, or NaN when it is nodata: NaN, +-Inf, or equal to
+// `nodata` (compared as float32 too for Float32 bands, whose nodata is often written as a
+// double that is not exactly a float). Scale and offset are applied to the rest. This is the
+// one place that decides which source values are heights.
+double to_height(
+    double raw, const std::optional<double>& nodata, bool float32, double scale, double offset);
 
 // Up to this many samples inspect_dem reads every block for the exact height range (about a
 // second per 100 Mpixel of a compressed GeoTIFF here); above it GDAL's approximate pass over
@@ -39,9 +62,13 @@ struct DemInfo {
 inline constexpr double kExactRangeSamples = 1e9;
 
 // Opens `path` read-only and describes band 1 (statistics computed from the data, not from
-// metadata; exact up to exact_range_samples samples). Throws InputError naming the path:
-// missing file, a directory, not a raster.
-DemInfo inspect_dem(const std::string& path, double exact_range_samples = kExactRangeSamples);
+// metadata; exact up to exact_range_samples samples, else from an overview or a decimated
+// read). `nodata`, when given, replaces the file's nodata value. Throws InputError naming the
+// path: missing file, a directory, not a raster, a NUL in the path; IoError naming GDAL's
+// message when the file cannot be read (permissions, truncated data, a missing VRT source).
+DemInfo inspect_dem(const std::string& path,
+                    double exact_range_samples = kExactRangeSamples,
+                    std::optional<double> nodata = std::nullopt);
 
 // Registers GDAL drivers once and routes GDAL's error handler to our logger. Idempotent.
 void init_gdal();
@@ -91,9 +118,12 @@ struct SourcePixel {
 // thread-safe), so a DemSource is safe to share.
 class DemSource {
 public:
-    // Throws InputError naming the file and problem: unreadable, no band, complex or RGB(A)
-    // data, sources of different CRSs.
-    static std::shared_ptr<const DemSource> open(const std::vector<std::string>& paths);
+    // `nodata`, when given, replaces every file's nodata value (--nodata). Throws InputError
+    // naming the file and problem: no band, complex or RGB(A) data, sources of different CRSs,
+    // likely voids not declared as nodata (DemInfo::likely_nodata) while `nodata` is not given;
+    // IoError when a file cannot be read.
+    static std::shared_ptr<const DemSource> open(const std::vector<std::string>& paths,
+                                                 std::optional<double> nodata = std::nullopt);
     virtual ~DemSource() = default;
 
     // Description of the (mosaic) raster, as inspect_dem gives it.

@@ -5,7 +5,13 @@
 // A write goes to a hidden temporary file in the target's directory
 // (".{file}.tmp-{pid}-{n}"), is fsynced and renamed over the target: rename(2) within one
 // directory is atomic, so a reader sees the old file or the new one, never a part.
+// Every file has a hidden checksum sidecar ".{file}.crc32" next to it (tiler/stores/checksum.hpp),
+// written just before it; a file that does not match its sidecar is damaged and reads as
+// missing (with a warning), so it is made again. Paths are opened one directory at a time with
+// O_NOFOLLOW: a symbolic link inside the store is never followed, for reading or writing.
 #include "core/error.hpp"
+#include "tiler/log.hpp"
+#include "tiler/stores/checksum.hpp"
 #include "tiler/stores/store.hpp"
 
 #include <atomic>
@@ -16,6 +22,8 @@
 #include <string>
 #include <sys/stat.h>
 #include <unistd.h>
+#include <utility>
+#include <vector>
 
 namespace tb::tiler {
 namespace {
@@ -48,6 +56,13 @@ std::string advice(int err) {
 
 struct Fd {
     int fd = -1;
+    Fd() = default;
+    explicit Fd(int f) : fd(f) {}
+    Fd(Fd&& o) noexcept : fd(o.fd) { o.fd = -1; }
+    Fd& operator=(Fd&& o) noexcept {
+        std::swap(fd, o.fd);
+        return *this;
+    }
     ~Fd() {
         if (fd >= 0) {
             ::close(fd);
@@ -55,28 +70,77 @@ struct Fd {
     }
 };
 
-// Writes `bytes` to `path` atomically. Parent directories are created as needed.
-void write_atomic(const std::string& path, std::string_view bytes) {
-    const fs::path target(path);
-    std::error_code ec;
-    fs::create_directories(target.parent_path(), ec);
-    if (ec) {
-        fail(target.parent_path().string(), "create directory", ec.value());
+// A path inside the store, as the directories leading to it and its file name.
+struct StorePath {
+    std::vector<std::string> dirs; // below the root
+    std::string name;
+    std::string shown; // root/dirs.../name, for messages
+};
+
+std::string sidecar_name(const std::string& name) {
+    return "." + name + ".crc32";
+}
+
+// Opens the directory `path.dirs` below `root` one part at a time without following a symbolic
+// link (O_NOFOLLOW), so nothing outside the root is ever reached, whatever links a store holds.
+// With `create`, missing parts are made. Returns an empty Fd when a part is missing (reads), or
+// is a link or a file (reads: logged; writes throw IoError).
+Fd open_dirs(const std::string& root, const StorePath& path, bool create) {
+    Fd dir(::open(root.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC));
+    if (dir.fd < 0) {
+        if (!create && (errno == ENOENT || errno == ENOTDIR)) {
+            return Fd();
+        }
+        fail(root, "open the store directory", errno);
     }
-    const std::string temp = (target.parent_path() /
-                              ("." + target.filename().string() + ".tmp-" +
-                               std::to_string(::getpid()) + "-" + std::to_string(++g_temp_counter)))
-                                 .string();
-    Fd out;
-    out.fd = ::open(temp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+    std::string reached = root;
+    for (const auto& part : path.dirs) {
+        reached += "/" + part;
+        if (create && ::mkdirat(dir.fd, part.c_str(), 0755) != 0 && errno != EEXIST) {
+            fail(reached, "create directory", errno);
+        }
+        Fd next(::openat(dir.fd, part.c_str(), O_RDONLY | O_DIRECTORY | O_NOFOLLOW | O_CLOEXEC));
+        if (next.fd < 0) {
+            const int err = errno;
+            struct stat st {};
+            const bool link = ::fstatat(dir.fd, part.c_str(), &st, AT_SYMLINK_NOFOLLOW) == 0 &&
+                              S_ISLNK(st.st_mode);
+            if (link) {
+                if (create) {
+                    throw IoError(reached + ": is a symbolic link; a store never follows links, "
+                                            "so remove it");
+                }
+                log::warn(reached + ": is a symbolic link inside the store; not followed, so " +
+                          path.shown + " counts as missing");
+                return Fd();
+            }
+            if (!create && (err == ENOENT || err == ENOTDIR)) {
+                return Fd();
+            }
+            fail(reached, "open directory", err);
+        }
+        dir = std::move(next);
+    }
+    return dir;
+}
+
+// Writes `bytes` as `name` in the directory `dir` atomically: a temporary file, fsync, rename.
+void write_in(const Fd& dir,
+              const std::string& name,
+              const std::string& shown,
+              std::string_view bytes) {
+    const std::string temp =
+        "." + name + ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(++g_temp_counter);
+    Fd out(
+        ::openat(dir.fd, temp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0644));
     if (out.fd < 0) {
-        fail(path, "create a temporary file", errno);
+        fail(shown, "create a temporary file", errno);
     }
     auto abandon = [&](const char* what, int err) {
         ::close(out.fd);
         out.fd = -1;
-        ::unlink(temp.c_str());
-        fail(path, what, err);
+        ::unlinkat(dir.fd, temp.c_str(), 0);
+        fail(shown, what, err);
     };
     const char* p = bytes.data();
     std::size_t left = bytes.size();
@@ -98,31 +162,46 @@ void write_atomic(const std::string& path, std::string_view bytes) {
     out.fd = -1;
     if (::close(fd) != 0) {
         const int err = errno;
-        ::unlink(temp.c_str());
-        fail(path, "write (close)", err);
+        ::unlinkat(dir.fd, temp.c_str(), 0);
+        fail(shown, "write (close)", err);
     }
-    if (::rename(temp.c_str(), path.c_str()) != 0) {
+    // renameat replaces a link at `name` itself, never what it points to.
+    if (::renameat(dir.fd, temp.c_str(), dir.fd, name.c_str()) != 0) {
         const int err = errno;
-        ::unlink(temp.c_str());
-        fail(path, "rename the temporary file into place", err);
+        ::unlinkat(dir.fd, temp.c_str(), 0);
+        fail(shown, "rename the temporary file into place", err);
     }
 }
 
-std::optional<std::string> read_file(const std::string& path) {
-    Fd in;
-    in.fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+// Writes the checksum sidecar, then the file, each atomically. A crash between the two leaves
+// a pair that does not match, which reads as damaged and is made again.
+void write_verified(const std::string& root, const StorePath& path, std::string_view bytes) {
+    const Fd dir = open_dirs(root, path, true);
+    write_in(dir, sidecar_name(path.name), path.shown, checksum_sidecar(bytes));
+    write_in(dir, path.name, path.shown, bytes);
+}
+
+// The whole file `name` in `dir`, or nullopt when it is absent or a symbolic link (logged).
+std::optional<std::string>
+read_in(const Fd& dir, const std::string& name, const std::string& shown) {
+    Fd in(::openat(dir.fd, name.c_str(), O_RDONLY | O_NOFOLLOW | O_NONBLOCK | O_CLOEXEC));
     if (in.fd < 0) {
         if (errno == ENOENT || errno == ENOTDIR) {
             return std::nullopt;
         }
-        fail(path, "open", errno);
+        if (errno == ELOOP) {
+            log::warn(shown + ": is a symbolic link inside the store; not followed, so it counts "
+                              "as missing");
+            return std::nullopt;
+        }
+        fail(shown, "open", errno);
     }
     struct stat st {};
     if (::fstat(in.fd, &st) != 0) {
-        fail(path, "stat", errno);
+        fail(shown, "stat", errno);
     }
     if (!S_ISREG(st.st_mode)) {
-        throw IoError(path + ": not a regular file; remove it or choose another output path");
+        throw IoError(shown + ": not a regular file; remove it or choose another output path");
     }
     std::string bytes;
     bytes.reserve(static_cast<std::size_t>(st.st_size));
@@ -133,12 +212,37 @@ std::optional<std::string> read_file(const std::string& path) {
             if (errno == EINTR) {
                 continue;
             }
-            fail(path, "read", errno);
+            fail(shown, "read", errno);
         }
         if (n == 0) {
             break;
         }
         bytes.append(buffer, static_cast<std::size_t>(n));
+    }
+    return bytes;
+}
+
+// The file's bytes when they match their sidecar checksum; nullopt when absent, and also
+// (with a warning) when damaged: empty, truncated, overwritten, flipped, or without a sidecar.
+std::optional<std::string> read_verified(const std::string& root, const StorePath& path) {
+    const Fd dir = open_dirs(root, path, false);
+    if (dir.fd < 0) {
+        return std::nullopt;
+    }
+    auto bytes = read_in(dir, path.name, path.shown);
+    if (!bytes) {
+        return std::nullopt;
+    }
+    const auto sidecar = read_in(dir, sidecar_name(path.name), path.shown + " (checksum)");
+    if (!sidecar) {
+        log::warn(path.shown + ": stored without its checksum file " + sidecar_name(path.name) +
+                  " (damaged, or written by an older terrabound); not served, it is made again");
+        return std::nullopt;
+    }
+    if (*sidecar != checksum_sidecar(*bytes)) {
+        log::warn(path.shown + ": damaged (" + std::to_string(bytes->size()) +
+                  " bytes that do not match their checksum); not served, it is made again");
+        return std::nullopt;
     }
     return bytes;
 }
@@ -152,34 +256,25 @@ public:
     explicit DirectoryStore(std::string root) : root_(std::move(root)) {}
 
     std::optional<std::string> get(const TileKey& key) const override {
-        return read_file(tile_path(key));
+        return read_verified(root_, tile_path(key));
     }
 
-    bool contains(const TileKey& key) const override {
-        struct stat st {};
-        const std::string path = tile_path(key);
-        if (::stat(path.c_str(), &st) == 0) {
-            return S_ISREG(st.st_mode);
-        }
-        if (errno == ENOENT || errno == ENOTDIR) {
-            return false;
-        }
-        fail(path, "stat", errno);
-    }
+    // A tile counts only when it is whole: --resume re-makes damaged ones.
+    bool contains(const TileKey& key) const override { return get(key).has_value(); }
 
     void put(const TileKey& key, std::string_view bytes) override {
-        write_atomic(tile_path(key), bytes);
+        write_verified(root_, tile_path(key), bytes);
     }
 
     std::optional<std::string> get_document(const std::string& layer,
                                             const std::string& name) const override {
-        return read_file(document_path(layer, name));
+        return read_verified(root_, document_path(layer, name));
     }
 
     void put_document(const std::string& layer,
                       const std::string& name,
                       std::string_view bytes) override {
-        write_atomic(document_path(layer, name), bytes);
+        write_verified(root_, document_path(layer, name), bytes);
     }
 
     bool has_layer(const std::string& layer) const override {
@@ -224,26 +319,47 @@ public:
     std::string describe() const override { return "directory " + root_; }
 
 private:
-    std::string tile_path(const TileKey& key) const {
+    StorePath tile_path(const TileKey& key) const {
         validate_key(key);
-        std::string path = root_ + "/" + key.layer + "/";
+        StorePath p;
+        p.dirs.push_back(key.layer);
         if (key.format == Format::Terrarium) {
-            path += "dem/"; // the server's URL without ?encoding
+            p.dirs.push_back("dem"); // the server's URL without ?encoding
         } else if (key.format == Format::Mapbox) {
-            path += "dem/mapbox/";
+            p.dirs.push_back("dem");
+            p.dirs.push_back("mapbox");
         }
         if (key.eps_level >= 0) {
-            path += "eps" + std::to_string(key.eps_level) + "/";
+            p.dirs.push_back("eps" + std::to_string(key.eps_level));
         }
-        path += std::to_string(key.id.z) + "/" + std::to_string(key.id.x) + "/" +
-                std::to_string(key.id.y) + "." + extension(key.format);
-        return path;
+        p.dirs.push_back(std::to_string(key.id.z));
+        p.dirs.push_back(std::to_string(key.id.x));
+        p.name = std::to_string(key.id.y) + "." + extension(key.format);
+        p.shown = shown(p);
+        return p;
     }
 
-    std::string document_path(const std::string& layer, const std::string& name) const {
+    StorePath document_path(const std::string& layer, const std::string& name) const {
         validate_layer_name(layer);
         validate_document_name(name);
-        return root_ + "/" + layer + "/" + name;
+        StorePath p;
+        p.dirs.push_back(layer);
+        std::size_t start = 0;
+        for (std::size_t slash; (slash = name.find('/', start)) != std::string::npos;
+             start = slash + 1) {
+            p.dirs.push_back(name.substr(start, slash - start));
+        }
+        p.name = name.substr(start);
+        p.shown = shown(p);
+        return p;
+    }
+
+    std::string shown(const StorePath& p) const {
+        std::string s = root_;
+        for (const auto& d : p.dirs) {
+            s += "/" + d;
+        }
+        return s + "/" + p.name;
     }
 
     std::string root_;
@@ -257,9 +373,15 @@ std::unique_ptr<TileStore> open_directory_store(const std::string& path) {
         throw IoError(path + ": exists and is not a directory; choose another output path (a "
                              "path ending in .sqlite makes an SQLite store)");
     }
-    fs::create_directories(path, ec);
-    if (ec) {
-        fail(path, "create directory", ec.value());
+    // Only the store directory itself is made: a missing parent is more likely a typo than a
+    // wish for a new tree of directories.
+    const fs::path parent = fs::path(path).lexically_normal().parent_path();
+    if (!parent.empty() && !fs::exists(parent, ec)) {
+        throw IoError(path + ": its parent directory " + parent.string() +
+                      " does not exist; create it first or choose another output path");
+    }
+    if (::mkdir(path.c_str(), 0755) != 0 && errno != EEXIST) {
+        fail(path, "create directory", errno);
     }
     std::string root = path;
     while (root.size() > 1 && root.back() == '/') {

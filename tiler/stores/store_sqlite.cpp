@@ -1,12 +1,18 @@
 // The SQLite store: one file, WAL journal, so one writer and many readers (also from other
 // processes on the same machine) work at once.
-//   tiles(layer, format, eps_level, z, x, y, data)  PRIMARY KEY(layer, format, eps_level, z, x, y)
-//   documents(layer, name, data)                     PRIMARY KEY(layer, name)
-//   meta(name, value)                                schema version and writer
+//   tiles(layer, format, eps_level, z, x, y, data, crc)  PRIMARY KEY(layer, format, eps_level, z,
+//                                                         x, y)
+//   documents(layer, name, data, crc)                    PRIMARY KEY(layer, name)
+//   meta(name, value)                                    schema version and writer
+// crc is the CRC-32 of data (tiler/stores/checksum.hpp). A row whose data does not match it is
+// damaged: it reads as missing, with a warning, and is made again. Schema version 1 files (no
+// crc column) are migrated when opened, in one transaction, taking their data as it is then.
 // Each put is one transaction and put_batch is one transaction for the whole batch, so a crash
 // leaves every row whole or absent. One connection serves all threads, behind a mutex, with
 // its statements prepared once.
 #include "core/error.hpp"
+#include "tiler/log.hpp"
+#include "tiler/stores/checksum.hpp"
 #include "tiler/stores/store.hpp"
 
 #include <filesystem>
@@ -22,7 +28,7 @@
 namespace tb::tiler {
 namespace {
 
-constexpr int kSchemaVersion = 1;
+constexpr int kSchemaVersion = 2;
 constexpr int kBusyTimeoutMs = 30000;
 
 std::string advice(int code) {
@@ -72,12 +78,9 @@ public:
     explicit SqliteStore(std::string path) : path_(std::move(path)) {
         std::error_code ec;
         const auto parent = std::filesystem::path(path_).parent_path();
-        if (!parent.empty()) {
-            std::filesystem::create_directories(parent, ec);
-            if (ec) {
-                throw IoError(parent.string() + ": cannot create directory (" + ec.message() +
-                              "); choose another output path");
-            }
+        if (!parent.empty() && !std::filesystem::exists(parent, ec)) {
+            throw IoError(path_ + ": its parent directory " + parent.string() +
+                          " does not exist; create it first or choose another output path");
         }
         sqlite3* raw = nullptr;
         const int rc =
@@ -96,10 +99,10 @@ public:
             exec("CREATE TABLE IF NOT EXISTS meta(name TEXT PRIMARY KEY, value TEXT NOT NULL);"
                  "CREATE TABLE IF NOT EXISTS tiles(layer TEXT NOT NULL, format TEXT NOT NULL,"
                  " eps_level INTEGER NOT NULL, z INTEGER NOT NULL, x INTEGER NOT NULL,"
-                 " y INTEGER NOT NULL, data BLOB NOT NULL,"
+                 " y INTEGER NOT NULL, data BLOB NOT NULL, crc INTEGER NOT NULL,"
                  " PRIMARY KEY(layer, format, eps_level, z, x, y));"
                  "CREATE TABLE IF NOT EXISTS documents(layer TEXT NOT NULL, name TEXT NOT NULL,"
-                 " data BLOB NOT NULL, PRIMARY KEY(layer, name));"
+                 " data BLOB NOT NULL, crc INTEGER NOT NULL, PRIMARY KEY(layer, name));"
                  "INSERT OR IGNORE INTO meta VALUES('schema_version', '" +
                      std::to_string(kSchemaVersion) +
                      "');"
@@ -112,15 +115,13 @@ public:
             throw;
         }
         check_schema_version();
-        get_ = prepare("SELECT data FROM tiles WHERE layer=?1 AND format=?2 AND eps_level=?3"
+        get_ = prepare("SELECT data, crc FROM tiles WHERE layer=?1 AND format=?2 AND eps_level=?3"
                        " AND z=?4 AND x=?5 AND y=?6");
-        contains_ = prepare("SELECT 1 FROM tiles WHERE layer=?1 AND format=?2 AND eps_level=?3"
-                            " AND z=?4 AND x=?5 AND y=?6");
-        put_ = prepare("INSERT OR REPLACE INTO tiles(layer, format, eps_level, z, x, y, data)"
-                       " VALUES(?1, ?2, ?3, ?4, ?5, ?6, ?7)");
-        get_doc_ = prepare("SELECT data FROM documents WHERE layer=?1 AND name=?2");
-        put_doc_ =
-            prepare("INSERT OR REPLACE INTO documents(layer, name, data) VALUES(?1, ?2, ?3)");
+        put_ = prepare("INSERT OR REPLACE INTO tiles(layer, format, eps_level, z, x, y, data, crc)"
+                       " VALUES(?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8)");
+        get_doc_ = prepare("SELECT data, crc FROM documents WHERE layer=?1 AND name=?2");
+        put_doc_ = prepare(
+            "INSERT OR REPLACE INTO documents(layer, name, data, crc) VALUES(?1, ?2, ?3, ?4)");
         has_layer_ = prepare("SELECT EXISTS(SELECT 1 FROM tiles WHERE layer=?1)"
                              " OR EXISTS(SELECT 1 FROM documents WHERE layer=?1)");
     }
@@ -130,16 +131,11 @@ public:
         std::lock_guard lock(mutex_);
         Reset reset{get_.get()};
         bind_key(get_.get(), key);
-        return fetch_blob(get_.get(), "read a tile");
+        return fetch_verified(get_.get(), "read a tile", [&] { return describe_key(key); });
     }
 
-    bool contains(const TileKey& key) const override {
-        validate_key(key);
-        std::lock_guard lock(mutex_);
-        Reset reset{contains_.get()};
-        bind_key(contains_.get(), key);
-        return step(contains_.get(), "look up a tile") == SQLITE_ROW;
-    }
+    // A tile counts only when it is whole: --resume re-makes damaged ones.
+    bool contains(const TileKey& key) const override { return get(key).has_value(); }
 
     void put(const TileKey& key, std::string_view bytes) override {
         validate_key(key);
@@ -172,7 +168,8 @@ public:
         Reset reset{get_doc_.get()};
         bind_text(get_doc_.get(), 1, layer);
         bind_text(get_doc_.get(), 2, name);
-        return fetch_blob(get_doc_.get(), "read a document");
+        return fetch_verified(
+            get_doc_.get(), "read a document", [&] { return "document " + layer + "/" + name; });
     }
 
     void put_document(const std::string& layer,
@@ -185,6 +182,7 @@ public:
         bind_text(put_doc_.get(), 1, layer);
         bind_text(put_doc_.get(), 2, name);
         bind_blob(put_doc_.get(), 3, bytes);
+        sqlite3_bind_int64(put_doc_.get(), 4, store_checksum(bytes));
         step(put_doc_.get(), "write a document");
     }
 
@@ -273,27 +271,88 @@ private:
         sqlite3_bind_int64(s, 6, key.id.y);
     }
 
-    std::optional<std::string> fetch_blob(sqlite3_stmt* s, const std::string& action) const {
+    static std::string describe_key(const TileKey& key) {
+        return "tile " + key.layer + "/" +
+               (key.eps_level >= 0 ? "eps" + std::to_string(key.eps_level) + "/" : "") +
+               std::to_string(key.id.z) + "/" + std::to_string(key.id.x) + "/" +
+               std::to_string(key.id.y) + "." + extension(key.format);
+    }
+
+    // The row's data (column 0) when it matches its checksum (column 1); nullopt when there is
+    // no row, and also (with a warning naming `what`) when the data is damaged.
+    template <typename What>
+    std::optional<std::string>
+    fetch_verified(sqlite3_stmt* s, const std::string& action, What what) const {
         if (step(s, action) != SQLITE_ROW) {
             return std::nullopt;
         }
         const void* data = sqlite3_column_blob(s, 0);
         const int size = sqlite3_column_bytes(s, 0);
-        return size > 0 ? std::string(static_cast<const char*>(data), size) : std::string();
+        std::string bytes =
+            size > 0 ? std::string(static_cast<const char*>(data), size) : std::string();
+        const bool has_crc = sqlite3_column_type(s, 1) == SQLITE_INTEGER;
+        if (!has_crc || sqlite3_column_int64(s, 1) != store_checksum(bytes)) {
+            log::warn(path_ + ": " + what() + " is damaged (" + std::to_string(bytes.size()) +
+                      " bytes that do not match their checksum); not served, it is made again");
+            return std::nullopt;
+        }
+        return bytes;
     }
 
     void put_locked(const TileKey& key, std::string_view bytes) {
         Reset reset{put_.get()};
         bind_key(put_.get(), key);
         bind_blob(put_.get(), 7, bytes);
+        sqlite3_bind_int64(put_.get(), 8, store_checksum(bytes));
         step(put_.get(), "write a tile");
     }
 
-    void check_schema_version() const {
+    // Schema 1 -> 2: adds the crc columns and fills them from the data as it is now.
+    void migrate_from_1() {
+        exec("BEGIN IMMEDIATE", "migrate the store to schema version 2");
+        try {
+            check(sqlite3_create_function_v2(db_.get(),
+                                             "tb_crc32",
+                                             1,
+                                             SQLITE_UTF8 | SQLITE_DETERMINISTIC,
+                                             nullptr,
+                                             &sql_crc32,
+                                             nullptr,
+                                             nullptr,
+                                             nullptr),
+                  "migrate the store to schema version 2");
+            exec("ALTER TABLE tiles ADD COLUMN crc INTEGER;"
+                 "UPDATE tiles SET crc = tb_crc32(data);"
+                 "ALTER TABLE documents ADD COLUMN crc INTEGER;"
+                 "UPDATE documents SET crc = tb_crc32(data);"
+                 "UPDATE meta SET value='2' WHERE name='schema_version';",
+                 "migrate the store to schema version 2");
+            exec("COMMIT", "migrate the store to schema version 2");
+        } catch (...) {
+            sqlite3_exec(db_.get(), "ROLLBACK", nullptr, nullptr, nullptr);
+            throw;
+        }
+        log::info(path_ + ": migrated to store schema version 2 (a checksum per tile)");
+    }
+
+    static void sql_crc32(sqlite3_context* context, int, sqlite3_value** args) {
+        const void* data = sqlite3_value_blob(args[0]);
+        const int size = sqlite3_value_bytes(args[0]);
+        sqlite3_result_int64(
+            context,
+            store_checksum(std::string_view(static_cast<const char*>(data), data ? size : 0)));
+    }
+
+    void check_schema_version() {
         Stmt s = prepare("SELECT value FROM meta WHERE name='schema_version'");
         if (step(s.get(), "read the schema version") == SQLITE_ROW) {
             const auto* text = sqlite3_column_text(s.get(), 0);
             const std::string version = text ? reinterpret_cast<const char*>(text) : "";
+            if (version == "1") {
+                s.reset();
+                migrate_from_1();
+                return;
+            }
             if (version != std::to_string(kSchemaVersion)) {
                 throw IoError(path_ + ": store schema version " + version +
                               ", this terrabound "
@@ -307,7 +366,7 @@ private:
     std::string path_;
     Db db_;
     mutable std::mutex mutex_;
-    Stmt get_, contains_, put_, get_doc_, put_doc_, has_layer_;
+    Stmt get_, put_, get_doc_, put_doc_, has_layer_;
 };
 
 } // namespace

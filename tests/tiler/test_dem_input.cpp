@@ -1,0 +1,328 @@
+// Bad DEMs get one clear error line with the documented exit code, or work: +-Inf samples,
+// files GDAL cannot read (truncated, declared far larger than they are, a VRT whose source is
+// gone, no read permission), rasters one sample thick, voids not declared as nodata (and the
+// --nodata fix), a NUL in a path. Real files in a temp dir, the real binary (TB_BINARY).
+#include "core/error.hpp"
+#include "tests/tiler/test_raster_util.hpp"
+#include "tiler/sources/gdal_source.hpp"
+
+#include <doctest/doctest.h>
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+#include <sys/wait.h>
+
+using tb_test::Fixture;
+using tb_test::ScratchDir;
+namespace fs = std::filesystem;
+
+namespace {
+
+struct Run {
+    int code = -1;
+    std::string out, err;
+};
+
+std::string slurp(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    std::ostringstream s;
+    s << in.rdbuf();
+    return s.str();
+}
+
+Run run(const ScratchDir& dir, const std::string& arguments, const std::string& prefix = "") {
+    const std::string out = dir.file("stdout.txt"), err = dir.file("stderr.txt");
+    const std::string command =
+        prefix + std::string(TB_BINARY) + " " + arguments + " >" + out + " 2>" + err;
+    const int status = std::system(command.c_str());
+    Run r;
+    r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    r.out = slurp(out);
+    r.err = slurp(err);
+    return r;
+}
+
+// Smooth hills over 0.5 x 0.5 degrees at 57N 11E, `n` x `n` samples.
+Fixture hills(int n, GDALDataType type = GDT_Float32) {
+    Fixture f;
+    f.width = f.height = n;
+    f.type = type;
+    f.epsg = 4326;
+    f.geotransform = std::array<double, 6>{11, 0.5 / n, 0, 57.5, 0, -0.5 / n};
+    for (int y = 0; y < n; ++y) {
+        for (int x = 0; x < n; ++x) {
+            f.values.push_back(std::round(300 + 200 * std::sin(x * 0.1) * std::cos(y * 0.13)));
+        }
+    }
+    return f;
+}
+
+// Every number in a JSON document is finite (nlohmann parses only valid JSON, which has no
+// inf or nan).
+void check_json_numbers(const nlohmann::json& j) {
+    if (j.is_number()) {
+        CHECK(std::isfinite(j.get<double>()));
+    }
+    for (const auto& child : j) {
+        if (j.is_structured()) {
+            check_json_numbers(child);
+        }
+    }
+}
+
+const char* kBuild = " --size 32 --threads 1";
+
+} // namespace
+
+TEST_CASE("to_height: NaN and +-Inf are nodata, like the nodata value; the rest is scaled") {
+    using tb::tiler::to_height;
+    const std::optional<double> none;
+    CHECK(std::isnan(to_height(INFINITY, none, false, 1, 0)));
+    CHECK(std::isnan(to_height(-INFINITY, none, true, 1, 0)));
+    CHECK(std::isnan(to_height(NAN, none, false, 1, 0)));
+    CHECK(std::isnan(to_height(-32767, -32767.0, false, 1, 0)));
+    // A Float32 band's nodata written as a double that is not a float.
+    CHECK(std::isnan(to_height(static_cast<float>(-3.4e38), -3.4e38, true, 1, 0)));
+    CHECK_FALSE(std::isnan(to_height(static_cast<float>(-3.4e38), -3.4e38, false, 1, 0)));
+    CHECK(to_height(100, -32767.0, false, 0.5, 10) == 60);
+}
+
+TEST_CASE("+-Inf samples are nodata: info shows a finite range and build writes valid JSON") {
+    ScratchDir dir;
+    Fixture f = hills(129);
+    f.values[5 * 129 + 5] = INFINITY;
+    f.values[6 * 129 + 90] = -INFINITY;
+    const std::string dem = tb_test::write_fixture(dir.file("edges.tif"), f);
+    const tb::tiler::DemInfo info = tb::tiler::inspect_dem(dem);
+    CHECK(info.has_data);
+    CHECK(info.min_height == 100);
+    CHECK(info.max_height == 500);
+
+    const Run i = run(dir, "info " + dem);
+    REQUIRE_MESSAGE(i.code == 0, i.err);
+    CHECK(i.out.find("inf") == std::string::npos);
+    const Run b = run(dir, "build " + dem + " -o " + dir.file("out") + kBuild + " --json");
+    REQUIRE_MESSAGE(b.code == 0, b.err);
+    check_json_numbers(nlohmann::json::parse(b.out));
+    for (const char* doc : {"tileset.json", "build-manifest.json"}) {
+        CAPTURE(doc);
+        const std::string text = slurp(dir.file(std::string("out/terrain/") + doc));
+        REQUIRE_FALSE(text.empty());
+        check_json_numbers(nlohmann::json::parse(text));
+    }
+}
+
+TEST_CASE("a truncated GeoTIFF is a read error (exit 3) naming GDAL's message") {
+    ScratchDir dir;
+    const std::string whole = tb_test::write_fixture(dir.file("whole.tif"), hills(129));
+    const std::string bytes = slurp(whole);
+    // The header and the strip offsets are at the front, the pixels behind them.
+    std::ofstream(dir.file("cut.tif"), std::ios::binary) << bytes.substr(0, bytes.size() / 2);
+    const std::string dem = dir.file("cut.tif");
+    try {
+        tb::tiler::inspect_dem(dem);
+        FAIL("expected an IoError");
+    } catch (const tb::IoError& e) {
+        const std::string what = e.what();
+        CHECK(what.find(dem + ": read failed (") != std::string::npos);
+    }
+    for (const std::string& command : {"info " + dem,
+                                       "build " + dem + " -o " + dir.file("out") + kBuild,
+                                       "tile " + dem + " 8 270 73 -o " + dir.file("t.glb")}) {
+        CAPTURE(command);
+        const Run r = run(dir, command);
+        CHECK(r.code == 3);
+        CHECK(r.err.find(dem + ": read failed (") != std::string::npos);
+        CHECK(r.err.find("nodata") == std::string::npos);
+    }
+}
+
+TEST_CASE("a TIFF declaring 10^6 x 10^6 pixels in 288 bytes is a read error (exit 3)") {
+    ScratchDir dir;
+    // Little-endian classic TIFF: one IFD, one strip of 4 * 10^12 bytes that is not there.
+    std::string t = std::string("II*\0", 4);
+    const auto u16 = [&](unsigned v) {
+        t += static_cast<char>(v & 0xff);
+        t += static_cast<char>(v >> 8);
+    };
+    const auto u32 = [&](std::uint32_t v) {
+        for (int k = 0; k < 4; ++k) {
+            t += static_cast<char>((v >> (8 * k)) & 0xff);
+        }
+    };
+    u32(8);
+    const std::uint32_t kSide = 1000000;
+    const std::vector<std::array<std::uint32_t, 3>> entries = {{256, 4, kSide},
+                                                               {257, 4, kSide},
+                                                               {258, 3, 32},
+                                                               {259, 3, 1},
+                                                               {262, 3, 1},
+                                                               {273, 4, 8},
+                                                               {277, 3, 1},
+                                                               {278, 4, kSide},
+                                                               {279, 4, 0xfffffff0u},
+                                                               {339, 3, 3}};
+    u16(static_cast<unsigned>(entries.size()));
+    for (const auto& [tag, type, value] : entries) {
+        u16(tag), u16(type), u32(1);
+        if (type == 3) {
+            u16(value), u16(0);
+        } else {
+            u32(value);
+        }
+    }
+    u32(0);
+    t.resize(288, '\0');
+    const std::string dem = dir.file("huge.tif");
+    std::ofstream(dem, std::ios::binary) << t;
+    REQUIRE(fs::file_size(dem) == 288);
+    const Run r = run(dir, "info " + dem);
+    CHECK(r.code == 3);
+    CHECK(r.err.find(dem + ": read failed (") != std::string::npos);
+    const Run b = run(dir, "build " + dem + " -o " + dir.file("out") + kBuild);
+    CHECK(b.code == 3);
+}
+
+TEST_CASE("a VRT whose source file is gone is a read error (exit 3) naming the missing file") {
+    ScratchDir dir;
+    tb_test::write_fixture(dir.file("part.tif"), hills(65));
+    std::ofstream(dir.file("mosaic.vrt"))
+        << "<VRTDataset rasterXSize=\"65\" rasterYSize=\"65\"><SRS>EPSG:4326</SRS>"
+           "<GeoTransform>11, 0.0076923, 0, 57.5, 0, -0.0076923</GeoTransform>"
+           "<VRTRasterBand dataType=\"Float32\" band=\"1\"><SimpleSource>"
+           "<SourceFilename relativeToVRT=\"1\">part.tif</SourceFilename>"
+           "<SourceBand>1</SourceBand></SimpleSource></VRTRasterBand></VRTDataset>";
+    const std::string vrt = dir.file("mosaic.vrt");
+    REQUIRE(run(dir, "info " + vrt).code == 0);
+    fs::remove(dir.file("part.tif"));
+    const Run r = run(dir, "info " + vrt);
+    CHECK(r.code == 3);
+    CHECK(r.err.find(vrt + ": read failed (") != std::string::npos);
+    CHECK(r.err.find("part.tif") != std::string::npos);
+}
+
+TEST_CASE("a DEM without read permission is a read error (exit 3), not a crash") {
+    ScratchDir dir;
+    // The SRTMHGT driver knows a file by its name; an unreadable .hgt used to crash GDAL.
+    Fixture f = hills(121, GDT_Int16);
+    const std::string dem = tb_test::write_fixture(dir.file("dem.tif"), f);
+    const std::string hgt = dir.file("N57E011.hgt");
+    fs::copy_file(dem, hgt);
+    fs::permissions(hgt, fs::perms::none);
+    fs::permissions(dir.path, fs::perms::all);
+    std::string prefix;
+    if (::geteuid() == 0) {
+        // Root reads anything; run the binary as 'nobody' when setpriv is there.
+        if (std::system("command -v setpriv >/dev/null 2>&1") != 0) {
+            MESSAGE("skipped: running as root without setpriv, so chmod 000 does not deny reads");
+            return;
+        }
+        prefix = "setpriv --reuid=65534 --regid=65534 --clear-groups ";
+    }
+    for (const std::string& command :
+         {"info " + hgt, "build " + hgt + " -o " + dir.file("out") + kBuild}) {
+        CAPTURE(command);
+        const Run r = run(dir, command, prefix);
+        CHECK(r.code == 3);
+        CHECK(r.err.find(hgt + ": cannot be read (Permission denied)") != std::string::npos);
+    }
+}
+
+TEST_CASE("rasters one sample thick are tiled: 1 x 1, 100000 x 1 and 1 x 300") {
+    ScratchDir dir;
+    struct Thin {
+        int width, height;
+    };
+    for (const Thin s : {Thin{1, 1}, Thin{100000, 1}, Thin{1, 300}}) {
+        CAPTURE(s.width);
+        CAPTURE(s.height);
+        Fixture f;
+        f.width = s.width, f.height = s.height;
+        f.epsg = 4326;
+        f.geotransform = std::array<double, 6>{11, 0.001, 0, 57.5, 0, -0.001};
+        for (int k = 0; k < s.width * s.height; ++k) {
+            f.values.push_back(100 + k % 50);
+        }
+        const std::string dem = tb_test::write_fixture(dir.file("thin.tif"), f);
+        const Run i = run(dir, "info " + dem);
+        REQUIRE_MESSAGE(i.code == 0, i.err);
+        CHECK(i.out.find("pyramid:") != std::string::npos);
+        fs::remove_all(dir.file("out"));
+        const Run b = run(dir, "build " + dem + " -o " + dir.file("out") + kBuild + " --json");
+        REQUIRE_MESSAGE(b.code == 0, b.err);
+        const auto summary = nlohmann::json::parse(b.out);
+        CHECK(summary["written"].get<int>() > 0);
+        CHECK(summary["failed"].get<int>() == 0);
+        check_json_numbers(nlohmann::json::parse(slurp(dir.file("out/terrain/tileset.json"))));
+    }
+}
+
+TEST_CASE("voids not declared as nodata are named with the fix, and --nodata fixes them") {
+    ScratchDir dir;
+    Fixture f = hills(129, GDT_Int16);
+    for (int y = 40; y < 60; ++y) {
+        for (int x = 30; x < 70; ++x) {
+            f.values[static_cast<std::size_t>(y) * 129 + x] = -32767; // 4.8% of the samples
+        }
+    }
+    const std::string dem = tb_test::write_fixture(dir.file("voids.tif"), f);
+    const tb::tiler::DemInfo info = tb::tiler::inspect_dem(dem);
+    REQUIRE(info.likely_nodata);
+    CHECK(*info.likely_nodata == -32767);
+    CHECK(info.likely_nodata_share == doctest::Approx(800.0 / (129 * 129)));
+
+    const Run b = run(dir, "build " + dem + " -o " + dir.file("out") + kBuild);
+    CHECK(b.code == 2);
+    CHECK(b.err.find(dem + ": 4.81% of band 1's samples are -32767") != std::string::npos);
+    CHECK(b.err.find("pass --nodata -32767") != std::string::npos);
+    CHECK(std::count(b.err.begin(), b.err.end(), '\n') == 1);
+    const Run i = run(dir, "info " + dem);
+    REQUIRE(i.code == 0);
+    CHECK(i.out.find("--nodata -32767") != std::string::npos);
+
+    const Run fixed =
+        run(dir, "build " + dem + " -o " + dir.file("out") + kBuild + " --nodata -32767 --json");
+    REQUIRE_MESSAGE(fixed.code == 0, fixed.err);
+    const auto summary = nlohmann::json::parse(fixed.out);
+    CHECK(summary["failed"].get<int>() == 0);
+    CHECK(summary["written"].get<int>() > 0);
+    const Run fixed_info = run(dir, "info " + dem + " --nodata -32767");
+    REQUIRE(fixed_info.code == 0);
+    CHECK(fixed_info.out.find("nodata:      -32767") != std::string::npos);
+    CHECK(fixed_info.out.find("heights:     100 .. 500") != std::string::npos);
+    const Run tile = run(
+        dir, "tile " + dem + " 9 543 418 -o " + dir.file("t.glb") + " --size 32 --nodata -32767");
+    CHECK_MESSAGE(tile.code == 0, tile.err);
+    CHECK(run(dir, "build " + dem + " -o " + dir.file("o2") + kBuild + " --nodata x").code == 2);
+}
+
+TEST_CASE("a sea at 0 m beside land, or a plateau, is not taken for undeclared voids") {
+    ScratchDir dir;
+    Fixture f = hills(129);
+    for (std::size_t k = 0; k < f.values.size() / 3; ++k) {
+        f.values[k] = 0; // a third at sea level, land from 100 m
+    }
+    CHECK_FALSE(
+        tb::tiler::inspect_dem(tb_test::write_fixture(dir.file("sea.tif"), f)).likely_nodata);
+    for (std::size_t k = 0; k < f.values.size() / 3; ++k) {
+        f.values[k] = 2500; // a flat plateau 2000 m above hills of 100 .. 500 m
+    }
+    CHECK_FALSE(
+        tb::tiler::inspect_dem(tb_test::write_fixture(dir.file("plateau.tif"), f)).likely_nodata);
+}
+
+TEST_CASE("a NUL byte in a DEM path is refused, not cut off") {
+    ScratchDir dir;
+    const std::string dem = tb_test::write_fixture(dir.file("a.tif"), hills(33));
+    const std::string with_nul = dem + std::string("\0.bak", 5);
+    try {
+        tb::tiler::inspect_dem(with_nul);
+        FAIL("expected an InputError");
+    } catch (const tb::InputError& e) {
+        CHECK(std::string(e.what()).find("NUL") != std::string::npos);
+        CHECK(std::string(e.what()).find(dem + "\\x00.bak") != std::string::npos);
+    }
+}
