@@ -152,7 +152,7 @@ TriangleStats scan_rows(const HeightGrid& grid,
     // The weights at x = 0 on row y (b0 + by * y), stepped exactly from row to row.
     std::int64_t ra = fn[0].b0 + fn[0].by * first_row, rb = fn[1].b0 + fn[1].by * first_row,
                  rc = fn[2].b0 + fn[2].by * first_row;
-    const auto align = [step](std::int64_t x) {
+    const auto align = [&](std::int64_t x) {
         return step == 1 ? x : x + (step - x % step) % step;
     };
     // The first visited row from which the two-edge side is cut by its lower edge. On the

@@ -873,7 +873,7 @@ struct HttpServer::Impl {
             }
         });
 
-        server.Options(".*", [this](const httplib::Request& req, httplib::Response& res) {
+        server.Options(".*", [](const httplib::Request& req, httplib::Response& res) {
             t_request.route = "preflight";
             res.status = 204;
             res.set_header("Access-Control-Allow-Methods", "GET, HEAD, OPTIONS");
@@ -908,7 +908,7 @@ struct HttpServer::Impl {
             res.set_content(landing_html(), "text/html; charset=utf-8");
         });
 
-        server.Get("/health", [this](const httplib::Request&, httplib::Response& res) {
+        server.Get("/health", [](const httplib::Request&, httplib::Response& res) {
             t_request.route = "health";
             res.set_header("Cache-Control", kNoStore);
             res.set_content("{\"status\":\"ok\"}\n", "application/json");
