@@ -178,6 +178,32 @@ TEST_CASE("spiky geographic DEM: every source pixel is within the published erro
     judge_layer(path, Guarantee::SourcePixels, mercator);
 }
 
+TEST_CASE("a DEM in EPSG:3857 meshed in the mercator scheme on its own pixels keeps every pixel "
+          "within the published error") {
+    tb_test::ScratchDir dir;
+    tb_test::Fixture f;
+    f.width = 300, f.height = 240;
+    f.values.resize(static_cast<std::size_t>(f.width) * f.height);
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<double> noise(0, 8);
+    for (int j = 0; j < f.height; ++j) {
+        for (int i = 0; i < f.width; ++i) {
+            f.values[static_cast<std::size_t>(j) * f.width + i] =
+                900 + 400 * std::sin(i / 19.0 + j / 31.0) + noise(rng) +
+                ((i * 5 + j * 11) % 53 == 0 ? 60 : 0);
+        }
+    }
+    // 76.4 m pixels (EPSG:3857 metres) near 46 N, 8 E.
+    f.geotransform = std::array<double, 6>{890555.9, 76.437, 0, 5780000.0, 0, -76.437};
+    f.epsg = 3857;
+    const std::string path = tb_test::write_fixture(dir.file("mercator.tif"), f);
+    LayerOptions mercator;
+    mercator.scheme = Scheme::Mercator;
+    judge_layer(path, Guarantee::SourcePixels, mercator);
+    // The geodetic scheme resamples it: measured.
+    judge_layer(path, Guarantee::Measured);
+}
+
 TEST_CASE("real DEMs: every source pixel is within the published error at the finest and the "
           "coarsest zoom") {
     if (const auto p = tb_test::shared_dem("N44W072.hgt")) {
