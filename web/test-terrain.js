@@ -2,7 +2,7 @@
 // CesiumTerrainProvider.fromUrl (its layer.json), asking for vertex normals, the water mask and
 // the metadata extension, with a procedural grid draped over the globe (no imagery download).
 // Query: server=URL (tile server origin, default this page's), layer=NAME (required), lon, lat
-// and height (camera, looking down at 50 degrees). State goes to window.tbTerrain for the browser
+// and height (camera), pitch (degrees below the horizon, default 50). State goes to window.tbTerrain for the browser
 // tests: ready once the provider is made, errors from its errorEvent, levels requested.
 (function () {
   'use strict';
@@ -45,10 +45,13 @@
     backgroundColor: Cesium.Color.TRANSPARENT,
   }));
 
-  state.lookDown = (lon, lat, height) => {
+  // The camera `height` metres above (lon, lat), moved south so that it looks at that point
+  // from `pitch` degrees below the horizon.
+  state.lookDown = (lon, lat, height, pitch = 50) => {
+    const back = height / Math.tan(Cesium.Math.toRadians(pitch)) / 111000;
     viewer.camera.setView({
-      destination: Cesium.Cartesian3.fromDegrees(lon, lat - height / 111000 * 0.8, height),
-      orientation: { heading: 0, pitch: Cesium.Math.toRadians(-50), roll: 0 },
+      destination: Cesium.Cartesian3.fromDegrees(lon, lat - back, height),
+      orientation: { heading: 0, pitch: Cesium.Math.toRadians(-pitch), roll: 0 },
     });
   };
 
@@ -98,7 +101,7 @@
     state.hasMetadata = provider.hasMetadata;
     scene.terrainProvider = provider;
     state.lookDown(Number(params.get('lon') || 0), Number(params.get('lat') || 0),
-      Number(params.get('height') || 80000));
+      Number(params.get('height') || 80000), Number(params.get('pitch') || 50));
     return true;
   })();
   state.ready.catch((e) => state.errors.push(String(e && e.message || e)));
