@@ -269,8 +269,8 @@ private:
     std::string
     data_terrain(const TileId& id, const TerrainSpec& spec, const LonLatBox& bounds) const {
         // The 15-bit quantization moves vertices by up to half a step (about 1/65534 of the
-        // tile) across the slope: it is measured at every sample, and where it would take the
-        // tile past its eps the tile is meshed again at half the eps, leaving it more room.
+        // tile) across the slope: it is measured at every sample, and where it takes the tile
+        // past its eps the tile is meshed again at a smaller eps, leaving it more room.
         const double eps = eps_for_zoom(id.z);
         const double target = budget_at(id.z, eps).drawn_bound;
         constexpr int kAttempts = 3;
@@ -288,10 +288,12 @@ private:
                            " sample(s) lie in no quantized triangle");
             }
             if (published <= target || guarantee() == Guarantee::Measured ||
-                attempt + 1 == kAttempts || mesh_eps / 2 < kMinEps) {
+                attempt + 1 == kAttempts || mesh_eps * 0.25 < kMinEps) {
                 break;
             }
-            mesh_eps /= 2;
+            // The mesher keeps at least 5/8 of eps (error_budget): take from it what the tile
+            // was over, and a margin.
+            mesh_eps *= std::clamp(1 - 1.6 * (published - target) / mesh_eps - 0.05, 0.25, 0.9);
         }
         published = std::max(published, target);
         if (published > target + 1e-9 && guarantee() == Guarantee::SourcePixels) {

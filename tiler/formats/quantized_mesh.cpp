@@ -80,8 +80,12 @@ struct Probe {
 // Triangles of q bucketed on a square grid over u/v, for point location.
 class TriangleBuckets {
 public:
-    explicit TriangleBuckets(const QuantizedMesh& q) : q_(q) {
-        cells_.resize(static_cast<std::size_t>(kCells) * kCells);
+    // About two triangles per cell.
+    explicit TriangleBuckets(const QuantizedMesh& q)
+        : q_(q),
+          cells_per_side_(std::clamp(
+              static_cast<int>(std::sqrt(static_cast<double>(q.triangles.size()) / 6)), 16, 1024)) {
+        cells_.resize(static_cast<std::size_t>(cells_per_side_) * cells_per_side_);
         for (std::size_t t = 0; t * 3 < q.triangles.size(); ++t) {
             double u0 = 1e9, u1 = -1e9, v0 = 1e9, v1 = -1e9;
             for (int k = 0; k < 3; ++k) {
@@ -91,7 +95,8 @@ public:
             }
             for (int cy = cell(v0); cy <= cell(v1); ++cy) {
                 for (int cx = cell(u0); cx <= cell(u1); ++cx) {
-                    cells_[static_cast<std::size_t>(cy) * kCells + static_cast<std::size_t>(cx)]
+                    cells_[static_cast<std::size_t>(cy) * cells_per_side_ +
+                           static_cast<std::size_t>(cx)]
                         .push_back(static_cast<std::uint32_t>(t));
                 }
             }
@@ -102,7 +107,7 @@ public:
     bool error_at(const Probe& p, double& error) const {
         bool found = false;
         error = 0;
-        const auto& list = cells_[static_cast<std::size_t>(cell(p.v)) * kCells +
+        const auto& list = cells_[static_cast<std::size_t>(cell(p.v)) * cells_per_side_ +
                                   static_cast<std::size_t>(cell(p.u))];
         for (std::uint32_t t : list) {
             const std::uint32_t a = q_.triangles[3 * t], b = q_.triangles[3 * t + 1],
@@ -128,11 +133,12 @@ public:
     }
 
 private:
-    static constexpr int kCells = 64;
-    static int cell(double w) {
-        return std::clamp(static_cast<int>(w * kCells / (kQuantizedMax + 1.0)), 0, kCells - 1);
+    int cell(double w) const {
+        return std::clamp(
+            static_cast<int>(w * cells_per_side_ / (kQuantizedMax + 1.0)), 0, cells_per_side_ - 1);
     }
     const QuantizedMesh& q_;
+    int cells_per_side_;
     std::vector<std::vector<std::uint32_t>> cells_;
 };
 
