@@ -149,6 +149,10 @@ public:
     TileRaster make_raster(const TileId& id) const override;
 
     std::string make_tile_at(const TileId& id, Format format, double eps) const override {
+        if (format == Format::Terrain) {
+            throw InputError("tile " + tile_name(id) +
+                             ": quantized-mesh tiles are made at their zoom's eps only");
+        }
         const MeshedTile t = mesh_tile_at(id, eps);
         EncodeReport report;
         std::string bytes =
@@ -279,6 +283,9 @@ private:
         QuantizedMesh q;
         for (int attempt = 0;; ++attempt) {
             t = mesh_at(id, mesh_eps, false);
+            if (t.mesh.triangle_count() == 0) {
+                throw NotFound("tile " + tile_name(id) + ": no triangle from the DEM"); // filler
+            }
             cover_rectangle(t.mesh, bounds);
             q = quantize_mesh(t.mesh, bounds);
             std::size_t uncovered = 0;

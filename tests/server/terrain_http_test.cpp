@@ -10,6 +10,8 @@
 #include <doctest/doctest.h>
 #include <nlohmann/json.hpp>
 
+#include <set>
+
 namespace {
 
 using namespace tb;
@@ -80,6 +82,52 @@ TEST_CASE("layer.json over HTTP lists every zoom from 0, the extensions and the 
         CHECK(a["endY"] == r.y1);
     }
     CHECK(j["data"]["minzoom"] == f.layer->min_zoom());
+}
+
+TEST_CASE("the metadata of the two root tiles lists, level by level, what layer.json lists") {
+    auto& f = fixture();
+    RunningServer server({{f.layer, {tiler::Format::Terrain}, nullptr}});
+    auto c = server.client();
+    auto doc = c.Get("/hills/layer.json");
+    REQUIRE(doc);
+    const auto available = nlohmann::json::parse(doc->body)["available"];
+    // Tiles per level, from the roots' metadata extension (child availability).
+    std::vector<std::set<std::pair<std::int64_t, std::int64_t>>> listed(available.size());
+    for (const std::int64_t x : {0, 1}) {
+        auto res = c.Get(terrain_url({0, x, 0}).c_str(),
+                         {{"Accept", "application/vnd.quantized-mesh;extensions=metadata"}});
+        REQUIRE(res);
+        const tb_qm::Tile t = tb_qm::read(res->body);
+        REQUIRE(t.extensions.size() == 1);
+        const auto meta = nlohmann::json::parse(t.extensions[0].data.substr(4));
+        CHECK(meta["filler"] == true);
+        const auto& levels = meta["available"];
+        CHECK(levels.size() == std::min<std::size_t>(tiler::kMetadataLevels, available.size() - 1));
+        for (std::size_t k = 0; k < levels.size(); ++k) {
+            for (const auto& r : levels[k]) {
+                for (std::int64_t y = r["startY"]; y <= r["endY"].get<std::int64_t>(); ++y) {
+                    for (std::int64_t tx = r["startX"]; tx <= r["endX"].get<std::int64_t>(); ++tx) {
+                        // Under this root: x within its half of the level.
+                        CHECK((tx >> (k + 1)) == x);
+                        listed[k + 1].insert({tx, y});
+                    }
+                }
+            }
+        }
+    }
+    for (std::size_t z = 1; z < available.size() && z <= tiler::kMetadataLevels; ++z) {
+        std::set<std::pair<std::int64_t, std::int64_t>> want;
+        for (const auto& r : available[z]) {
+            for (std::int64_t y = r["startY"]; y <= r["endY"].get<std::int64_t>(); ++y) {
+                for (std::int64_t x = r["startX"]; x <= r["endX"].get<std::int64_t>(); ++x) {
+                    want.insert({x, y});
+                }
+            }
+        }
+        CAPTURE(z);
+        CHECK(listed[z] == want);
+        CHECK_FALSE(want.empty());
+    }
 }
 
 TEST_CASE("a terrain tile carries exactly the extensions its Accept header names, gzipped, "
