@@ -60,6 +60,15 @@ int main(int argc, char** argv) {
     const int z = argc > 2 ? std::atoi(argv[2]) : layer->max_zoom();
     const int runs = argc > 3 ? std::max(1, std::atoi(argv[3])) : 3;
     const tiler::TileRange range = layer->tiles_at(z);
+    if (range.empty()) {
+        std::fprintf(stderr,
+                     "terrain_bench: %s has no tile at zoom %d (zooms %d..%d)\n",
+                     input.c_str(),
+                     z,
+                     layer->min_zoom(),
+                     layer->max_zoom());
+        return 2;
+    }
     std::vector<double> terrain_s, glb_s;
     double terrain_bytes = 0, gzip_bytes = 0, glb_bytes = 0, worst = 0;
     bool over = false;

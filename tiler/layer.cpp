@@ -167,7 +167,10 @@ public:
         return mesh_at(id, eps, true);
     }
 
-    // mesh_tile_at, keeping the triangles over voids when drop_voids is false.
+    // mesh_tile_at, or with drop_voids false a mesh that draws the voids too: meshed at their
+    // filled heights as if they were data (left unconstrained, they would span steep triangles
+    // whose every small move, as quantization makes, shifts the valid samples beside them).
+    // The raster's valid mask is kept: the promise holds at the valid samples.
     MeshedTile mesh_at(const TileId& id, double eps, bool drop_voids) const {
         check_eps(eps, "eps");
         check_id(id);
@@ -175,12 +178,29 @@ public:
         t.budget = budget_at(id.z, eps);
         if (pixels_) {
             PixelTile pixel = make_pixel_tile(*source_, *pixels_, options_.scheme, id, datum_);
+            std::vector<std::uint8_t> valid;
+            if (!drop_voids) {
+                valid.swap(pixel.raster.grid.valid);
+                for (BorderProfile& side : pixel.sides) {
+                    fill_profile(side);
+                }
+                pixel.corner_valid.fill(1);
+            }
             t.mesh = mesh_pixel_tile(pixel, t.budget, drop_voids);
             t.raster = std::move(pixel.raster);
+            if (!drop_voids) {
+                t.raster.grid.valid.swap(valid);
+            }
             return t;
         }
         t.raster = make_raster(id);
-        t.mesh = to_tile_mesh(t.raster, mesh_tile(t.raster, t.budget), drop_voids);
+        if (drop_voids) {
+            t.mesh = to_tile_mesh(t.raster, mesh_tile(t.raster, t.budget), true);
+        } else {
+            TileRaster filled = t.raster;
+            filled.grid.valid.clear();
+            t.mesh = to_tile_mesh(filled, mesh_tile(filled, t.budget), false);
+        }
         // Every valid source pixel under the tile, as the drawn tile must hold it.
         for (const SourcePixel& p : source_->pixels_in(t.raster.bounds)) {
             CheckPoint c;
@@ -227,6 +247,36 @@ public:
     const DemSource& source() const override { return *source_; }
 
 private:
+    // Fills the points of a border line with no data beside them (on the geoid) linearly along
+    // the line between the nearest points with data, and marks every point valid: a function of
+    // the line's own profile, which both tiles beside it compute alike, so they still share the
+    // line's vertices. A line without data stays on the geoid.
+    static void fill_profile(BorderProfile& p) {
+        const std::size_t n = p.heights.size();
+        std::size_t last = n; // the previous point with data
+        for (std::size_t k = 0; k <= n; ++k) {
+            if (k < n && !p.valid[k]) {
+                continue;
+            }
+            if (last == n && k < n) {
+                std::fill(p.heights.begin(),
+                          p.heights.begin() + static_cast<std::ptrdiff_t>(k),
+                          p.heights[k]);
+            } else if (last != n && k == n) {
+                std::fill(p.heights.begin() + static_cast<std::ptrdiff_t>(last + 1),
+                          p.heights.end(),
+                          p.heights[last]);
+            } else if (last != n) {
+                for (std::size_t i = last + 1; i < k; ++i) {
+                    const double t = static_cast<double>(i - last) / static_cast<double>(k - last);
+                    p.heights[i] = static_cast<float>((1 - t) * p.heights[last] + t * p.heights[k]);
+                }
+            }
+            last = k;
+        }
+        std::fill(p.valid.begin(), p.valid.end(), std::uint8_t{1});
+    }
+
     TerrainSpec terrain_spec() const {
         return TerrainSpec{options_.name, min_zoom_, max_zoom_, footprint_, [this](int z) {
                                return eps_for_zoom(z);
@@ -277,7 +327,7 @@ private:
         // past its eps the tile is meshed again at a smaller eps, leaving it more room.
         const double eps = eps_for_zoom(id.z);
         const double target = budget_at(id.z, eps).drawn_bound;
-        constexpr int kAttempts = 3;
+        constexpr int kAttempts = 4;
         double mesh_eps = eps, published = 0;
         MeshedTile t;
         QuantizedMesh q;
@@ -299,8 +349,8 @@ private:
                 break;
             }
             // The mesher keeps at least 5/8 of eps (error_budget): take from it what the tile
-            // was over, and a margin.
-            mesh_eps *= std::clamp(1 - 1.6 * (published - target) / mesh_eps - 0.05, 0.25, 0.9);
+            // was over (the quantization's share changes with the mesh), and a margin.
+            mesh_eps *= std::clamp(1 - 2 * (published - target) / mesh_eps - 0.1, 0.25, 0.85);
         }
         published = std::max(published, target);
         if (published > target + 1e-9 && guarantee() == Guarantee::SourcePixels) {

@@ -159,24 +159,80 @@ QuantizedMesh quantize_mesh(const TileMesh& mesh, const LonLatBox& bounds) {
     QuantizedMesh q;
     q.bounds = bounds;
     const std::size_t n = mesh.vertex_count();
+    q.u.resize(n), q.v.resize(n), q.h.resize(n);
+    for (std::size_t i = 0; i < n; ++i) {
+        q.u[i] = quantize_coordinate(mesh.x[i], bounds.west, bounds.east);
+        q.v[i] = quantize_coordinate(mesh.y[i], bounds.south, bounds.north);
+    }
+    q.triangles.assign(mesh.triangles.begin(), mesh.triangles.end());
+
+    // Moving a vertex moves the surface at the vertex's own place by the slope times the move,
+    // which is what breaks eps on steep ground; pixel-tile vertices sit on the samples the
+    // mesher fitted. So an interior vertex that quantization moves gets the height that puts the
+    // moved surface back through its old place and height (two Gauss-Seidel passes over the
+    // vertices, as its neighbours move too). Vertices on the border lines keep their heights, so
+    // that both tiles beside a line draw it alike.
+    std::vector<double> z(mesh.z.begin(), mesh.z.end());
+    std::vector<std::uint32_t> start(n + 1, 0), fan(mesh.triangles.size());
+    for (core::Index i : mesh.triangles) {
+        ++start[i + 1];
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+        start[i + 1] += start[i];
+    }
+    {
+        std::vector<std::uint32_t> at(start.begin(), start.end() - 1);
+        for (std::size_t e = 0; e < mesh.triangles.size(); ++e) {
+            fan[at[mesh.triangles[e]]++] = static_cast<std::uint32_t>(e);
+        }
+    }
+    const double su = kQuantizedMax / (bounds.east - bounds.west);
+    const double sv = kQuantizedMax / (bounds.north - bounds.south);
+    for (int pass = 0; pass < 2; ++pass) {
+        for (std::size_t i = 0; i < n; ++i) {
+            if (q.u[i] == 0 || q.u[i] == kQuantizedMax || q.v[i] == 0 || q.v[i] == kQuantizedMax) {
+                continue;
+            }
+            const double pu = (mesh.x[i] - bounds.west) * su, pv = (mesh.y[i] - bounds.south) * sv;
+            for (std::uint32_t k = start[i]; k < start[i + 1]; ++k) {
+                // The corner of the triangle at i, then the two others.
+                const std::size_t e = fan[k], t = e / 3 * 3;
+                const core::Index b = mesh.triangles[t + (e - t + 1) % 3],
+                                  c = mesh.triangles[t + (e - t + 2) % 3];
+                const double ua = q.u[i], va = q.v[i], ub = q.u[b], vb = q.v[b], uc = q.u[c],
+                             vc = q.v[c];
+                const double area = (ub - ua) * (vc - va) - (uc - ua) * (vb - va);
+                if (area <= 0) {
+                    continue;
+                }
+                const double wa = ((ub - pu) * (vc - pv) - (uc - pu) * (vb - pv)) / area;
+                const double wb = ((uc - pu) * (va - pv) - (ua - pu) * (vc - pv)) / area;
+                const double wc = 1 - wa - wb;
+                if (wa < 0 || wb < 0 || wc < 0) {
+                    continue;
+                }
+                // Only where the vertex carries most of the point (near it, as a half step is).
+                if (wa > 0.5) {
+                    z[i] = (mesh.z[i] - wb * z[b] - wc * z[c]) / wa;
+                }
+                break;
+            }
+        }
+    }
     float lo = std::numeric_limits<float>::infinity(), hi = -lo;
-    for (float z : mesh.z) {
-        lo = std::min(lo, z), hi = std::max(hi, z);
+    for (double h : z) {
+        lo = std::min(lo, static_cast<float>(h)), hi = std::max(hi, static_cast<float>(h));
     }
     if (n == 0) {
         lo = hi = 0;
     }
     q.min_height = lo, q.max_height = hi;
-    q.u.resize(n), q.v.resize(n), q.h.resize(n);
+    const double range = static_cast<double>(hi) - lo;
     for (std::size_t i = 0; i < n; ++i) {
-        q.u[i] = quantize_coordinate(mesh.x[i], bounds.west, bounds.east);
-        q.v[i] = quantize_coordinate(mesh.y[i], bounds.south, bounds.north);
-        const double range = static_cast<double>(hi) - lo;
-        q.h[i] = range > 0 ? static_cast<std::uint16_t>(std::round(
-                                 (static_cast<double>(mesh.z[i]) - lo) / range * kQuantizedMax))
+        q.h[i] = range > 0 ? static_cast<std::uint16_t>(std::clamp(
+                                 std::round((z[i] - lo) / range * kQuantizedMax), 0.0, 32767.0))
                            : 0;
     }
-    q.triangles.assign(mesh.triangles.begin(), mesh.triangles.end());
     return q;
 }
 

@@ -33,7 +33,8 @@ inline constexpr unsigned kAllQuantizedMeshExtensions = kOctVertexNormals | kWat
 // u[i], v[i] in 0..32767 over the rectangle and height min_height + h[i] / 32767 * (max_height -
 // min_height). Vertices exactly on the rectangle's border lines (x == west, ...) get 0 or 32767;
 // every other vertex is kept strictly inside (1..32766), so the edge lists hold exactly the border
-// vertices. Vertices and triangles keep the mesh's order.
+// vertices. An interior vertex that quantization moves takes the mesh's height at its new
+// place (border vertices keep theirs). Vertices and triangles keep the mesh's order.
 struct QuantizedMesh {
     LonLatBox bounds;
     float min_height = 0, max_height = 0;
