@@ -180,11 +180,7 @@ public:
             PixelTile pixel = make_pixel_tile(*source_, *pixels_, options_.scheme, id, datum_);
             std::vector<std::uint8_t> valid;
             if (!drop_voids) {
-                valid.swap(pixel.raster.grid.valid);
-                for (BorderProfile& side : pixel.sides) {
-                    fill_profile(side);
-                }
-                pixel.corner_valid.fill(1);
+                valid = fill_for_terrain(pixel);
             }
             t.mesh = mesh_pixel_tile(pixel, t.budget, drop_voids);
             t.raster = std::move(pixel.raster);
@@ -247,34 +243,73 @@ public:
     const DemSource& source() const override { return *source_; }
 
 private:
-    // Fills the points of a border line with no data beside them (on the geoid) linearly along
-    // the line between the nearest points with data, and marks every point valid: a function of
-    // the line's own profile, which both tiles beside it compute alike, so they still share the
-    // line's vertices. A line without data stays on the geoid.
-    static void fill_profile(BorderProfile& p) {
-        const std::size_t n = p.heights.size();
+    // Fills the points of a line with no data (valid 0) linearly along the line between the
+    // nearest points with data, and marks every point valid. A line without data keeps its
+    // heights. A function of the line alone: two tiles that share the line fill it alike.
+    static void fill_line(std::vector<float>& heights, std::vector<std::uint8_t>& valid) {
+        const std::size_t n = heights.size();
         std::size_t last = n; // the previous point with data
         for (std::size_t k = 0; k <= n; ++k) {
-            if (k < n && !p.valid[k]) {
+            if (k < n && !valid[k]) {
                 continue;
             }
             if (last == n && k < n) {
-                std::fill(p.heights.begin(),
-                          p.heights.begin() + static_cast<std::ptrdiff_t>(k),
-                          p.heights[k]);
+                std::fill(
+                    heights.begin(), heights.begin() + static_cast<std::ptrdiff_t>(k), heights[k]);
             } else if (last != n && k == n) {
-                std::fill(p.heights.begin() + static_cast<std::ptrdiff_t>(last + 1),
-                          p.heights.end(),
-                          p.heights[last]);
+                std::fill(heights.begin() + static_cast<std::ptrdiff_t>(last + 1),
+                          heights.end(),
+                          heights[last]);
             } else if (last != n) {
                 for (std::size_t i = last + 1; i < k; ++i) {
                     const double t = static_cast<double>(i - last) / static_cast<double>(k - last);
-                    p.heights[i] = static_cast<float>((1 - t) * p.heights[last] + t * p.heights[k]);
+                    heights[i] = static_cast<float>((1 - t) * heights[last] + t * heights[k]);
                 }
             }
             last = k;
         }
-        std::fill(p.valid.begin(), p.valid.end(), std::uint8_t{1});
+        std::fill(valid.begin(), valid.end(), std::uint8_t{1});
+    }
+
+    // A pixel tile made ready to mesh its voids as data (see mesh_at): the voids of the block's
+    // outer rows and columns that lie on the tile's border lines (pixel centres on the line,
+    // which the tile beside has too), and of the border lines between pixels, filled along the
+    // line; the other voids keep their filled heights (those depend on the window read, which
+    // differs between tiles, but no other tile has them). Returns the block's valid mask.
+    static std::vector<std::uint8_t> fill_for_terrain(PixelTile& pixel) {
+        core::HeightGrid& g = pixel.raster.grid;
+        std::vector<std::uint8_t> valid;
+        valid.swap(g.valid);
+        if (!valid.empty()) {
+            const int w = g.width, h = g.height;
+            for (int s = 0; s < 4; ++s) {
+                if (pixel.sides[static_cast<std::size_t>(s)].present) {
+                    continue; // the line lies between pixels: its profile, below
+                }
+                const bool column = s == kWest || s == kEast;
+                const int fixed = s == kWest ? 0 : s == kEast ? w - 1 : s == kNorth ? 0 : h - 1;
+                const int n = column ? h : w;
+                std::vector<float> line(static_cast<std::size_t>(n));
+                std::vector<std::uint8_t> ok(static_cast<std::size_t>(n));
+                const auto at = [&](int k) {
+                    return column ? static_cast<std::size_t>(k) * w + fixed
+                                  : static_cast<std::size_t>(fixed) * w + k;
+                };
+                for (int k = 0; k < n; ++k) {
+                    line[static_cast<std::size_t>(k)] = g.heights[at(k)];
+                    ok[static_cast<std::size_t>(k)] = valid[at(k)];
+                }
+                fill_line(line, ok);
+                for (int k = 0; k < n; ++k) {
+                    g.heights[at(k)] = line[static_cast<std::size_t>(k)];
+                }
+            }
+        }
+        for (BorderProfile& side : pixel.sides) {
+            fill_line(side.heights, side.valid);
+        }
+        pixel.corner_valid.fill(1);
+        return valid;
     }
 
     TerrainSpec terrain_spec() const {
@@ -324,34 +359,24 @@ private:
     data_terrain(const TileId& id, const TerrainSpec& spec, const LonLatBox& bounds) const {
         // The 15-bit quantization moves vertices by up to half a step (about 1/65534 of the
         // tile) across the slope: it is measured at every sample, and where it takes the tile
-        // past its eps the tile is meshed again at a smaller eps, leaving it more room.
+        // past its eps the worst samples become vertices (quantize_within). The border lines
+        // keep the vertices the zoom's eps gave them, so neighbouring tiles still share them.
         const double eps = eps_for_zoom(id.z);
         const double target = budget_at(id.z, eps).drawn_bound;
-        constexpr int kAttempts = 4;
-        double mesh_eps = eps, published = 0;
-        MeshedTile t;
-        QuantizedMesh q;
-        for (int attempt = 0;; ++attempt) {
-            t = mesh_at(id, mesh_eps, false);
-            if (t.mesh.triangle_count() == 0) {
-                throw NotFound("tile " + tile_name(id) + ": no triangle from the DEM"); // filler
-            }
-            cover_rectangle(t.mesh, bounds);
-            q = quantize_mesh(t.mesh, bounds);
-            std::size_t uncovered = 0;
-            published = quantized_error(q, t.raster, t.source_pixels, &uncovered) + t.budget.sag;
-            if (uncovered > 0) {
-                log::debug("tile " + tile_name(id) + ": " + std::to_string(uncovered) +
-                           " sample(s) lie in no quantized triangle");
-            }
-            if (published <= target || guarantee() == Guarantee::Measured ||
-                attempt + 1 == kAttempts || mesh_eps * 0.25 < kMinEps) {
-                break;
-            }
-            // The mesher keeps at least 5/8 of eps (error_budget): take from it what the tile
-            // was over (the quantization's share changes with the mesh), and a margin.
-            mesh_eps *= std::clamp(1 - 2 * (published - target) / mesh_eps - 0.1, 0.25, 0.85);
+        MeshedTile t = mesh_at(id, eps, false);
+        if (t.mesh.triangle_count() == 0) {
+            throw NotFound("tile " + tile_name(id) + ": no triangle from the DEM"); // filler
         }
+        cover_rectangle(t.mesh, bounds);
+        double error = 0;
+        std::size_t uncovered = 0;
+        const QuantizedMesh q = quantize_within(
+            t.mesh, bounds, t.raster, t.source_pixels, target - t.budget.sag, error, &uncovered);
+        if (uncovered > 0) {
+            log::debug("tile " + tile_name(id) + ": " + std::to_string(uncovered) +
+                       " sample(s) lie in no quantized triangle");
+        }
+        double published = error + t.budget.sag;
         published = std::max(published, target);
         if (published > target + 1e-9 && guarantee() == Guarantee::SourcePixels) {
             log::warn("tile " + tile_name(id) + ".terrain: 15-bit quantization leaves it " +

@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <cstring>
 #include <limits>
+#include <map>
 
 namespace tb::tiler {
 namespace {
@@ -75,6 +76,7 @@ std::uint16_t quantize_coordinate(double x, double lo, double hi) {
 // A point the drawn surface is judged at, in continuous u/v units.
 struct Probe {
     double u = 0, v = 0, h = 0;
+    double lon = 0, lat = 0;
 };
 
 // Triangles of q bucketed on a square grid over u/v, for point location.
@@ -103,8 +105,12 @@ public:
         }
     }
 
-    // The largest |drawn - p.h| over the triangles holding p; false when none does.
-    bool error_at(const Probe& p, double& error) const {
+    // The largest |drawn - p.h| over the triangles holding p, and the triangle giving it (with
+    // p's smallest barycentric weight in it); false when none holds p.
+    bool error_at(const Probe& p,
+                  double& error,
+                  std::uint32_t* where = nullptr,
+                  std::array<double, 3>* weights = nullptr) const {
         bool found = false;
         error = 0;
         const auto& list = cells_[static_cast<std::size_t>(cell(p.v)) * cells_per_side_ +
@@ -126,7 +132,16 @@ public:
                 continue;
             }
             const double h = wa * q_.height(a) + wb * q_.height(b) + wc * q_.height(c);
-            error = std::max(error, std::abs(h - p.h));
+            const double e = std::abs(h - p.h);
+            if (!found || e > error) {
+                error = e;
+                if (where) {
+                    *where = t;
+                }
+                if (weights) {
+                    *weights = {wa, wb, wc};
+                }
+            }
             found = true;
         }
         return found;
@@ -236,27 +251,19 @@ QuantizedMesh quantize_mesh(const TileMesh& mesh, const LonLatBox& bounds) {
     return q;
 }
 
-double quantized_error(const QuantizedMesh& q,
-                       const TileRaster& raster,
-                       const std::vector<CheckPoint>& points,
-                       std::size_t* uncovered) {
-    const LonLatBox& b = q.bounds;
+namespace {
+
+// The valid samples of raster.grid and the check points, in the tile's u/v units.
+std::vector<Probe>
+probes_of(const LonLatBox& b, const TileRaster& raster, const std::vector<CheckPoint>& points) {
     const auto to_probe = [&](const LonLat& p, double h) {
         return Probe{(p.lon - b.west) / (b.east - b.west) * kQuantizedMax,
                      (p.lat - b.south) / (b.north - b.south) * kQuantizedMax,
-                     h};
+                     h,
+                     p.lon,
+                     p.lat};
     };
-    const TriangleBuckets buckets(q);
-    double worst = 0;
-    std::size_t missed = 0;
-    const auto judge = [&](const Probe& p) {
-        double e = 0;
-        if (buckets.error_at(p, e)) {
-            worst = std::max(worst, e);
-        } else {
-            ++missed;
-        }
-    };
+    std::vector<Probe> out;
     const core::HeightGrid& g = raster.grid;
     std::vector<double> lon(static_cast<std::size_t>(g.width)),
         lat(static_cast<std::size_t>(g.height));
@@ -269,18 +276,179 @@ double quantized_error(const QuantizedMesh& q,
     for (int j = 0; j < g.height; ++j) {
         for (int i = 0; i < g.width; ++i) {
             if (g.is_valid(i, j)) {
-                judge(to_probe({lon[static_cast<std::size_t>(i)], lat[static_cast<std::size_t>(j)]},
-                               g.at(i, j)));
+                out.push_back(
+                    to_probe({lon[static_cast<std::size_t>(i)], lat[static_cast<std::size_t>(j)]},
+                             g.at(i, j)));
             }
         }
     }
     for (const CheckPoint& c : points) {
-        judge(to_probe(grid_to_lonlat(raster, c.column, c.row), c.height));
+        out.push_back(to_probe(grid_to_lonlat(raster, c.column, c.row), c.height));
     }
-    if (uncovered) {
-        *uncovered = missed;
+    return out;
+}
+
+double worst_error(const QuantizedMesh& q, const std::vector<Probe>& probes, std::size_t* missed) {
+    const TriangleBuckets buckets(q);
+    double worst = 0;
+    std::size_t outside = 0;
+    for (const Probe& p : probes) {
+        double e = 0;
+        if (buckets.error_at(p, e)) {
+            worst = std::max(worst, e);
+        } else {
+            ++outside;
+        }
+    }
+    if (missed) {
+        *missed = outside;
     }
     return worst;
+}
+
+} // namespace
+
+double quantized_error(const QuantizedMesh& q,
+                       const TileRaster& raster,
+                       const std::vector<CheckPoint>& points,
+                       std::size_t* uncovered) {
+    return worst_error(q, probes_of(q.bounds, raster, points), uncovered);
+}
+
+QuantizedMesh quantize_within(TileMesh& mesh,
+                              const LonLatBox& bounds,
+                              const TileRaster& raster,
+                              const std::vector<CheckPoint>& points,
+                              double allowed,
+                              double& error,
+                              std::size_t* uncovered) {
+    const std::vector<Probe> probes = probes_of(bounds, raster, points);
+    constexpr int kRounds = 8;
+    constexpr double kClear = 1e-3; // a weight below this puts the sample on an edge
+    constexpr std::uint32_t kNoTriangle = ~std::uint32_t{0};
+    for (int round = 0;; ++round) {
+        QuantizedMesh q = quantize_mesh(mesh, bounds);
+        // Per triangle, its worst sample past `allowed` off the border lines (a vertex there
+        // would be missing in the tile beside) and off the triangle's corners.
+        const TriangleBuckets buckets(q);
+        struct Worst {
+            double error = 0;
+            std::size_t probe = 0;
+            std::array<double, 3> w{};
+        };
+        std::vector<Worst> worst(mesh.triangle_count());
+        error = 0;
+        std::size_t outside = 0;
+        for (std::size_t k = 0; k < probes.size(); ++k) {
+            const Probe& p = probes[k];
+            double e = 0;
+            std::uint32_t t = 0;
+            std::array<double, 3> w{};
+            if (!buckets.error_at(p, e, &t, &w)) {
+                ++outside;
+                continue;
+            }
+            error = std::max(error, e);
+            const int on_edges = (w[0] < kClear) + (w[1] < kClear) + (w[2] < kClear);
+            const bool movable = p.lon != bounds.west && p.lon != bounds.east &&
+                                 p.lat != bounds.south && p.lat != bounds.north && on_edges < 2;
+            if (e > allowed && e > worst[t].error && movable) {
+                worst[t] = {e, k, w};
+            }
+        }
+        if (uncovered) {
+            *uncovered = outside;
+        }
+        std::vector<std::uint32_t> order;
+        for (std::uint32_t t = 0; t < worst.size(); ++t) {
+            if (worst[t].error > 0) {
+                order.push_back(t);
+            }
+        }
+        if (error <= allowed || round + 1 == kRounds || order.empty()) {
+            return q;
+        }
+        std::sort(order.begin(), order.end(), [&worst](std::uint32_t a, std::uint32_t b) {
+            return std::pair(worst[a].error, b) > std::pair(worst[b].error, a);
+        });
+        // The triangles beside the edges samples lie on: the twins of those edges, found in one
+        // pass over the triangles (directed edge (b, a) of the twin of (a, b)).
+        std::vector<std::pair<std::pair<core::Index, core::Index>, std::uint32_t>> twins;
+        for (std::uint32_t t : order) {
+            for (std::uint32_t k = 0; k < 3; ++k) {
+                if (worst[t].w[k] < kClear) {
+                    const core::Index a = mesh.triangles[3 * t + (k + 1) % 3],
+                                      b = mesh.triangles[3 * t + (k + 2) % 3];
+                    twins.push_back({{b, a}, kNoTriangle});
+                }
+            }
+        }
+        std::sort(twins.begin(), twins.end());
+        for (std::uint32_t t = 0; t < mesh.triangle_count() && !twins.empty(); ++t) {
+            for (std::uint32_t k = 0; k < 3; ++k) {
+                const std::pair<core::Index, core::Index> e{mesh.triangles[3 * t + k],
+                                                            mesh.triangles[3 * t + (k + 1) % 3]};
+                const auto it =
+                    std::lower_bound(twins.begin(), twins.end(), std::pair(e, std::uint32_t{0}));
+                if (it != twins.end() && it->first == e) {
+                    it->second = t;
+                }
+            }
+        }
+        const auto twin_of = [&twins](core::Index a, core::Index b) {
+            const std::pair<core::Index, core::Index> e{b, a};
+            const auto it =
+                std::lower_bound(twins.begin(), twins.end(), std::pair(e, std::uint32_t{0}));
+            return it != twins.end() && it->first == e ? it->second : kNoTriangle;
+        };
+        std::vector<std::uint8_t> touched(mesh.triangle_count(), 0);
+        for (std::uint32_t t : order) {
+            if (touched[t]) {
+                continue;
+            }
+            const Probe& p = probes[worst[t].probe];
+            const auto& w = worst[t].w;
+            const core::Index tri[3] = {
+                mesh.triangles[3 * t], mesh.triangles[3 * t + 1], mesh.triangles[3 * t + 2]};
+            int edge = -1; // the corner opposite the edge the sample lies on
+            for (int k = 0; k < 3; ++k) {
+                if (w[static_cast<std::size_t>(k)] < kClear) {
+                    edge = k;
+                }
+            }
+            if (edge < 0) {
+                // Inside: three triangles around the sample.
+                const core::Index v = mesh.add(p.lon, p.lat, static_cast<float>(p.h), false);
+                mesh.triangles[3 * t + 2] = v;
+                mesh.triangles.insert(mesh.triangles.end(), {tri[1], tri[2], v, tri[2], tri[0], v});
+                touched[t] = 1;
+                continue;
+            }
+            // On the edge (a, b) opposite corner r: (a, b, r) and its twin (b, a, s) become
+            // (a, v, r), (v, b, r), (b, v, s), (v, a, s).
+            const core::Index r = tri[edge], a = tri[(edge + 1) % 3], b = tri[(edge + 2) % 3];
+            const std::uint32_t t2 = twin_of(a, b);
+            if (t2 == kNoTriangle || touched[t2]) {
+                continue;
+            }
+            core::Index s2 = 0;
+            for (std::uint32_t k = 0; k < 3; ++k) {
+                const core::Index c = mesh.triangles[3 * t2 + k];
+                if (c != a && c != b) {
+                    s2 = c;
+                }
+            }
+            const core::Index v = mesh.add(p.lon, p.lat, static_cast<float>(p.h), false);
+            mesh.triangles[3 * t] = a;
+            mesh.triangles[3 * t + 1] = v;
+            mesh.triangles[3 * t + 2] = r;
+            mesh.triangles[3 * t2] = b;
+            mesh.triangles[3 * t2 + 1] = v;
+            mesh.triangles[3 * t2 + 2] = s2;
+            mesh.triangles.insert(mesh.triangles.end(), {v, b, r, v, a, s2});
+            touched[t] = touched[t2] = 1;
+        }
+    }
 }
 
 bool horizon_occlusion_point(const std::array<double, 3>& direction,

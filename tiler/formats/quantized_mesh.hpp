@@ -55,6 +55,20 @@ double quantized_error(const QuantizedMesh& q,
                        const std::vector<CheckPoint>& points,
                        std::size_t* uncovered = nullptr);
 
+// quantize_mesh, refined until the quantized surface is within `allowed` of every valid sample
+// of raster.grid and every check point: each round splits every triangle whose worst sample is
+// past `allowed` in three at that sample (a new vertex with the sample's height; samples on the
+// tile's border lines or on a triangle's edge are not used, so the border lines keep their
+// vertices and neighbouring tiles still share them), at most 8 rounds. `mesh` gets the new
+// vertices; `error` is the final largest |drawn - sample| (as quantized_error).
+QuantizedMesh quantize_within(TileMesh& mesh,
+                              const LonLatBox& bounds,
+                              const TileRaster& raster,
+                              const std::vector<CheckPoint>& points,
+                              double allowed,
+                              double& error,
+                              std::size_t* uncovered = nullptr);
+
 struct QuantizedMeshExtras {
     std::vector<std::array<double, 3>> normals; // unit ECEF normal per mesh vertex; empty: none
     std::vector<std::uint8_t> water_mask;       // 1 or 256 * 256 bytes; empty: none
