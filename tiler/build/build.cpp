@@ -826,8 +826,8 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
                             : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
     log::info("build: " + std::to_string(summary.planned) + " tiles, zoom " +
               std::to_string(layer->min_zoom()) + ".." + std::to_string(layer->max_zoom()) +
-              (terrain ? " (terrain from zoom 0)" : "") + ", " +
-              std::to_string(threads) + " thread(s), into " + store->describe() +
+              (terrain ? " (terrain from zoom 0)" : "") + ", " + std::to_string(threads) +
+              " thread(s), into " + store->describe() +
               (o.shard ? ", shard " + std::to_string(o.shard->index) + "/" +
                              std::to_string(o.shard->count)
                        : ""));
