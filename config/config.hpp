@@ -27,8 +27,11 @@ struct ServerConfig {
 
 struct LayerConfig {
     tiler::LayerOptions options; // sources already resolved against the config's dir
-    std::vector<tiler::Format> formats = {
-        tiler::Format::Glb, tiler::Format::Drc, tiler::Format::Terrarium, tiler::Format::Mapbox};
+    std::vector<tiler::Format> formats = {tiler::Format::Glb,
+                                          tiler::Format::Drc,
+                                          tiler::Format::Terrarium,
+                                          tiler::Format::Mapbox,
+                                          tiler::Format::Terrain};
     std::optional<std::string> store; // directory or *.sqlite / *.db; none: memory only
 };
 

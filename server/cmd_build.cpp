@@ -56,8 +56,9 @@ std::vector<tiler::Format> parse_formats(const std::string& text) {
     for (const auto& name : split(text, ',')) {
         const auto f = tiler::parse_format(name);
         if (!f) {
-            throw InputError("build: --formats: unknown format '" + name +
-                             "'; expected a comma-separated list of glb, drc, terrarium, mapbox");
+            throw InputError(
+                "build: --formats: unknown format '" + name +
+                "'; expected a comma-separated list of glb, drc, terrarium, mapbox, terrain");
         }
         formats.push_back(*f);
     }

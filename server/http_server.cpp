@@ -4,6 +4,7 @@
 
 #include "core/error.hpp"
 #include "tiler/dem_tiles.hpp"
+#include "tiler/formats/quantized_mesh.hpp"
 #include "tiler/json_number.hpp"
 #include "tiler/log.hpp"
 #include "tiler/tile_grid.hpp"
@@ -287,6 +288,54 @@ tiler::Format dem_encoding(const httplib::Request& req) {
         return tiler::Format::Mapbox;
     }
     throw InputError("encoding '" + e.substr(0, 40) + "' is unknown; use terrarium or mapbox");
+}
+
+// The quantized-mesh extensions a request's Accept header asks for: the names in the
+// `extensions` parameter of its application/vnd.quantized-mesh media ranges, joined by '-'
+// (CesiumJS sends "application/vnd.quantized-mesh;extensions=octvertexnormals-watermask-
+// metadata,application/octet-stream;q=0.9,*/*;q=0.01"). Unknown names are ignored.
+unsigned accepted_extensions(const std::string& accept) {
+    unsigned mask = 0;
+    std::size_t start = 0;
+    while (start <= accept.size()) {
+        std::size_t end = accept.find(',', start);
+        if (end == std::string::npos) {
+            end = accept.size();
+        }
+        std::string range = accept.substr(start, end - start);
+        std::transform(range.begin(), range.end(), range.begin(), [](unsigned char c) {
+            return static_cast<char>(std::tolower(c));
+        });
+        range.erase(std::remove_if(range.begin(),
+                                   range.end(),
+                                   [](unsigned char c) { return std::isspace(c); }),
+                    range.end());
+        if (range.rfind("application/vnd.quantized-mesh", 0) == 0) {
+            const std::size_t at = range.find(";extensions=");
+            if (at != std::string::npos) {
+                std::string list = range.substr(at + 12);
+                list = list.substr(0, list.find(';'));
+                std::size_t p = 0;
+                while (p <= list.size()) {
+                    std::size_t q = list.find('-', p);
+                    if (q == std::string::npos) {
+                        q = list.size();
+                    }
+                    const std::string name = list.substr(p, q - p);
+                    if (name == "octvertexnormals") {
+                        mask |= tiler::kOctVertexNormals;
+                    } else if (name == "watermask") {
+                        mask |= tiler::kWaterMask;
+                    } else if (name == "metadata") {
+                        mask |= tiler::kMetadata;
+                    }
+                    p = q + 1;
+                }
+            }
+        }
+        start = end + 1;
+    }
+    return mask;
 }
 
 // The scheme and authority clients reach this server by, for the absolute URLs of TileJSON:
@@ -703,6 +752,11 @@ struct HttpServer::Impl {
             }
             out << "],\"stored\":" << (served.store ? "true" : "false") << ",\"tileset\":\"/"
                 << o.name << "/tileset.json\",\"tiles\":\"/" << o.name << "/{z}/{x}/{y}.{format}\"";
+            if (o.scheme == tiler::Scheme::Geodetic &&
+                std::find(served.formats.begin(), served.formats.end(), tiler::Format::Terrain) !=
+                    served.formats.end()) {
+                out << ",\"layer_json\":\"/" << o.name << "/layer.json\"";
+            }
             out << dem_json(served) << "}";
             first = false;
         }
@@ -961,6 +1015,13 @@ struct HttpServer::Impl {
                        serve_tile(req, res);
                    });
 
+        // quantized-mesh tiles for CesiumTerrainProvider (their layer.json is a document).
+        server.Get(R"(/+([^/]+)/+([^/]*)/+([^/]*)/+([^/]*)\.terrain)",
+                   [this](const httplib::Request& req, httplib::Response& res) {
+                       t_request.route = "terrain";
+                       serve_terrain(req, res);
+                   });
+
         server.Get(R"(/+([^/]+)/+(.+))",
                    [this](const httplib::Request& req, httplib::Response& res) {
                        t_request.route = "document";
@@ -999,6 +1060,33 @@ struct HttpServer::Impl {
             return;
         }
         send_blob(req, res, *blob, tiler::media_type(encoding), kTileCacheControl);
+    }
+
+    void serve_terrain(const httplib::Request& req, httplib::Response& res) {
+        std::int64_t z = 0, x = 0, y = 0;
+        if (!parse_index(req.matches[2].str(), 2, z) || !parse_index(req.matches[3].str(), 10, x) ||
+            !parse_index(req.matches[4].str(), 10, y) || z > tiler::kMaxZoom) {
+            throw InputError("terrain tile coordinates must be /{z}/{x}/{y}.terrain with "
+                             "non-negative integers (z up to " +
+                             std::to_string(tiler::kMaxZoom) + ")");
+        }
+        const unsigned extensions = accepted_extensions(req.get_header_value("Accept"));
+        const auto blob = tiles.terrain(
+            req.matches[1].str(), tiler::TileId{static_cast<int>(z), x, y}, extensions);
+        if (!blob) {
+            res.set_header("Retry-After", std::to_string(kRetryAfterSeconds));
+            send_error(res, 503, "the server is busy generating tiles; retry shortly");
+            return;
+        }
+        send_blob(req,
+                  res,
+                  *blob,
+                  tiler::media_type(tiler::Format::Terrain),
+                  kTileCacheControl,
+                  &metrics);
+        // The extensions sent depend on Accept, the coding on Accept-Encoding.
+        res.headers.erase("Vary");
+        res.set_header("Vary", "Accept, Accept-Encoding");
     }
 
     void serve_tile(const httplib::Request& req, httplib::Response& res) {

@@ -1,6 +1,8 @@
 // TileService: LRU -> store -> single-flight generation on a bounded pool.
 #include "server/tile_service.hpp"
 
+#include "tiler/formats/quantized_mesh.hpp"
+
 #include "core/error.hpp"
 #include "tiler/dem_tiles.hpp"
 #include "tiler/log.hpp"
@@ -277,6 +279,22 @@ void check_mesh_tile(const tiler::Layer& layer, const tiler::TileId& id, tiler::
     }
 }
 
+// The same for a quantized-mesh tile, which every zoom up to max_zoom has (filler where the
+// layer has no data).
+void check_terrain_tile(const tiler::Layer& layer, const tiler::TileId& id) {
+    const std::string where =
+        std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
+    if (!tiler::is_valid(tiler::Scheme::Geodetic, id)) {
+        throw InputError("terrain tile " + where +
+                         " is outside the geodetic TMS (x below 2^(z+1), y below 2^z)");
+    }
+    if (id.z > layer.max_zoom()) {
+        throw NotFound("layer '" + layer.options().name + "' has no terrain tile " + where +
+                       " (max zoom " + std::to_string(layer.max_zoom()) +
+                       "; clients upsample its parent)");
+    }
+}
+
 // The same for a raster DEM tile, whose pyramid is EPSG:3857 XYZ whatever the layer's scheme.
 void check_dem_tile(const tiler::Layer& layer, const tiler::TileId& id) {
     const std::string where =
@@ -316,6 +334,8 @@ std::shared_ptr<const Blob> TileService::tile(const std::string& layer_name,
     if (tiler::is_dem_format(format)) {
         TB_ASSERT(eps.level == -1); // DEM tiles have no eps
         check_dem_tile(layer, id);
+    } else if (format == tiler::Format::Terrain) {
+        check_terrain_tile(layer, id);
     } else {
         check_mesh_tile(layer, id, eps);
     }
@@ -459,11 +479,33 @@ std::shared_ptr<const Blob> TileService::tile(const std::string& layer_name,
     return blob;
 }
 
+std::shared_ptr<const Blob>
+TileService::terrain(const std::string& layer, const tiler::TileId& id, unsigned extensions) {
+    const std::shared_ptr<const Blob> full = tile(layer, id, tiler::Format::Terrain, {});
+    if (!full || extensions == tiler::kAllQuantizedMeshExtensions) {
+        return full;
+    }
+    Impl& s = *impl_;
+    const std::string key = tile_key(layer, id, tiler::Format::Terrain, -1) + "/x" +
+                            std::to_string(extensions) + "/" + full->etag;
+    std::shared_ptr<const Blob> blob = s.cache.get(key);
+    if (!blob) {
+        blob = make_blob(tiler::select_extensions(full->bytes, extensions));
+        s.cache.put(key, blob);
+    }
+    return blob;
+}
+
 std::shared_ptr<const Blob> TileService::document(const std::string& layer_name,
                                                   const std::string& path) {
     const ServedLayer* served = find(layer_name);
     if (!served) {
         throw NotFound("unknown layer '" + layer_name + "'");
+    }
+    if (path == "layer.json" &&
+        std::find(served->formats.begin(), served->formats.end(), tiler::Format::Terrain) ==
+            served->formats.end()) {
+        throw NotFound("layer '" + layer_name + "' does not serve terrain (quantized-mesh)");
     }
     Impl& s = *impl_;
     const std::string key = "d/" + layer_name + "/" + path;

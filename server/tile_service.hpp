@@ -81,6 +81,12 @@ public:
                                      tiler::Format format,
                                      tiler::EpsChoice eps);
 
+    // The layer's quantized-mesh tile with only the extensions in `extensions` (a mask of
+    // tiler::QuantizedMeshExtension): the tile with all of them, as tile() gives it, cut down
+    // and cached per mask. nullptr when busy, as tile().
+    std::shared_ptr<const Blob>
+    terrain(const std::string& layer, const tiler::TileId& id, unsigned extensions);
+
     // A tileset document of the layer ("tileset.json", "subtrees/0/0/0.subtree", ...). Throws
     // NotFound for an unknown layer or a path the layer has no document for.
     std::shared_ptr<const Blob> document(const std::string& layer, const std::string& path);

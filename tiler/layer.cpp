@@ -5,6 +5,8 @@
 #include "core/error.hpp"
 #include "core/triangulate.hpp"
 #include "tiler/formats/encode.hpp"
+#include "tiler/formats/quantized_mesh.hpp"
+#include "tiler/geodesy.hpp"
 #include "tiler/log.hpp"
 #include "tiler/mesh/pixel_tile.hpp"
 #include "tiler/sources/gdal_source.hpp"
@@ -111,10 +113,25 @@ public:
         spec.has_tile = [this](const TileId& id) { return may_have_tile(id); };
         spec.budget_for_zoom = [this](int z) { return budget_at(z, eps_for_zoom(z)); };
         spec.error_for_tile = [this](const TileId& id) { return tile_error(id); };
+        if (path == "layer.json") {
+            if (options_.scheme != Scheme::Geodetic) {
+                return false;
+            }
+            out = terrain_layer_json(terrain_spec());
+            return true;
+        }
         return tileset_document(spec, path, out);
     }
 
     std::string make_tile(const TileId& id, Format format, EpsChoice eps) const override {
+        if (format == Format::Terrain) {
+            if (eps.level >= 0) {
+                throw InputError("layer '" + options_.name +
+                                 "': quantized-mesh terrain tiles have only their zoom's eps "
+                                 "(CesiumJS picks levels itself); drop ?eps");
+            }
+            return make_terrain(id);
+        }
         double value = 0;
         if (eps.level < 0) {
             check_id(id);
@@ -132,6 +149,10 @@ public:
     TileRaster make_raster(const TileId& id) const override;
 
     std::string make_tile_at(const TileId& id, Format format, double eps) const override {
+        if (format == Format::Terrain) {
+            throw InputError("tile " + tile_name(id) +
+                             ": quantized-mesh tiles are made at their zoom's eps only");
+        }
         const MeshedTile t = mesh_tile_at(id, eps);
         EncodeReport report;
         std::string bytes =
@@ -143,18 +164,39 @@ public:
     }
 
     MeshedTile mesh_tile_at(const TileId& id, double eps) const override {
+        return mesh_at(id, eps, true);
+    }
+
+    // mesh_tile_at, or with drop_voids false a mesh that draws the voids too: meshed at their
+    // filled heights as if they were data (left unconstrained, they would span steep triangles
+    // whose every small move, as quantization makes, shifts the valid samples beside them).
+    // The raster's valid mask is kept: the promise holds at the valid samples.
+    MeshedTile mesh_at(const TileId& id, double eps, bool drop_voids) const {
         check_eps(eps, "eps");
         check_id(id);
         MeshedTile t;
         t.budget = budget_at(id.z, eps);
         if (pixels_) {
             PixelTile pixel = make_pixel_tile(*source_, *pixels_, options_.scheme, id, datum_);
-            t.mesh = mesh_pixel_tile(pixel, t.budget);
+            std::vector<std::uint8_t> valid;
+            if (!drop_voids) {
+                valid = fill_for_terrain(pixel);
+            }
+            t.mesh = mesh_pixel_tile(pixel, t.budget, drop_voids);
             t.raster = std::move(pixel.raster);
+            if (!drop_voids) {
+                t.raster.grid.valid.swap(valid);
+            }
             return t;
         }
         t.raster = make_raster(id);
-        t.mesh = to_tile_mesh(t.raster, mesh_tile(t.raster, t.budget), true);
+        if (drop_voids) {
+            t.mesh = to_tile_mesh(t.raster, mesh_tile(t.raster, t.budget), true);
+        } else {
+            TileRaster filled = t.raster;
+            filled.grid.valid.clear();
+            t.mesh = to_tile_mesh(filled, mesh_tile(filled, t.budget), false);
+        }
         // Every valid source pixel under the tile, as the drawn tile must hold it.
         for (const SourcePixel& p : source_->pixels_in(t.raster.bounds)) {
             CheckPoint c;
@@ -201,6 +243,264 @@ public:
     const DemSource& source() const override { return *source_; }
 
 private:
+    // Fills the points of a line with no data (valid 0) linearly along the line between the
+    // nearest points with data, and marks every point valid. A line without data keeps its
+    // heights. A function of the line alone: two tiles that share the line fill it alike.
+    static void fill_line(std::vector<float>& heights, std::vector<std::uint8_t>& valid) {
+        const std::size_t n = heights.size();
+        std::size_t last = n; // the previous point with data
+        for (std::size_t k = 0; k <= n; ++k) {
+            if (k < n && !valid[k]) {
+                continue;
+            }
+            if (last == n && k < n) {
+                std::fill(
+                    heights.begin(), heights.begin() + static_cast<std::ptrdiff_t>(k), heights[k]);
+            } else if (last != n && k == n) {
+                std::fill(heights.begin() + static_cast<std::ptrdiff_t>(last + 1),
+                          heights.end(),
+                          heights[last]);
+            } else if (last != n) {
+                for (std::size_t i = last + 1; i < k; ++i) {
+                    const double t = static_cast<double>(i - last) / static_cast<double>(k - last);
+                    heights[i] = static_cast<float>((1 - t) * heights[last] + t * heights[k]);
+                }
+            }
+            last = k;
+        }
+        std::fill(valid.begin(), valid.end(), std::uint8_t{1});
+    }
+
+    // A pixel tile made ready to mesh its voids as data (see mesh_at): the voids of the block's
+    // outer rows and columns that lie on the tile's border lines (pixel centres on the line,
+    // which the tile beside has too), and of the border lines between pixels, filled along the
+    // line; the other voids keep their filled heights (those depend on the window read, which
+    // differs between tiles, but no other tile has them). Returns the block's valid mask.
+    static std::vector<std::uint8_t> fill_for_terrain(PixelTile& pixel) {
+        core::HeightGrid& g = pixel.raster.grid;
+        std::vector<std::uint8_t> valid;
+        valid.swap(g.valid);
+        if (!valid.empty()) {
+            const int w = g.width, h = g.height;
+            for (int s = 0; s < 4; ++s) {
+                if (pixel.sides[static_cast<std::size_t>(s)].present) {
+                    continue; // the line lies between pixels: its profile, below
+                }
+                const bool column = s == kWest || s == kEast;
+                const int fixed = s == kWest ? 0 : s == kEast ? w - 1 : s == kNorth ? 0 : h - 1;
+                const int n = column ? h : w;
+                std::vector<float> line(static_cast<std::size_t>(n));
+                std::vector<std::uint8_t> ok(static_cast<std::size_t>(n));
+                const auto at = [&](int k) {
+                    return column ? static_cast<std::size_t>(k) * w + fixed
+                                  : static_cast<std::size_t>(fixed) * w + k;
+                };
+                for (int k = 0; k < n; ++k) {
+                    line[static_cast<std::size_t>(k)] = g.heights[at(k)];
+                    ok[static_cast<std::size_t>(k)] = valid[at(k)];
+                }
+                fill_line(line, ok);
+                for (int k = 0; k < n; ++k) {
+                    g.heights[at(k)] = line[static_cast<std::size_t>(k)];
+                }
+            }
+        }
+        for (BorderProfile& side : pixel.sides) {
+            fill_line(side.heights, side.valid);
+        }
+        pixel.corner_valid.fill(1);
+        return valid;
+    }
+
+    TerrainSpec terrain_spec() const {
+        return TerrainSpec{options_.name, min_zoom_, max_zoom_, footprint_, [this](int z) {
+                               return eps_for_zoom(z);
+                           }};
+    }
+
+    // A quantized-mesh tile (tiler/formats/quantized_mesh.hpp) with every extension: meshed
+    // from the DEM where the layer has data, flat filler on the geoid elsewhere at zooms up to
+    // max_zoom (CesiumJS never asks for a tile whose parent is missing).
+    std::string make_terrain(const TileId& id) const {
+        if (options_.scheme != Scheme::Geodetic) {
+            throw InputError("layer '" + options_.name +
+                             "': quantized-mesh terrain needs the geodetic scheme");
+        }
+        if (!is_valid(options_.scheme, id)) {
+            throw InputError("tile " + tile_name(id) + ": outside the geodetic scheme (z 0.." +
+                             std::to_string(kMaxZoom) + ", x below 2^(z+1), y below 2^z)");
+        }
+        if (id.z > max_zoom_) {
+            throw NotFound("tile " + tile_name(id) + ": beyond layer '" + options_.name +
+                           "''s max zoom " + std::to_string(max_zoom_) +
+                           " (clients upsample its parent)");
+        }
+        const TerrainSpec spec = terrain_spec();
+        const LonLatBox bounds = tile_bounds(options_.scheme, id);
+        if (may_have_tile(id)) {
+            try {
+                return data_terrain(id, spec, bounds);
+            } catch (const NotFound&) {
+                // no source pixel centre lies in the tile: filler
+            }
+        }
+        const TileMesh filler = terrain_filler(bounds);
+        QuantizedMeshExtras extras;
+        extras.normals.resize(filler.vertex_count());
+        for (std::size_t v = 0; v < filler.vertex_count(); ++v) {
+            extras.normals[v] = up_vector(filler.x[v], filler.y[v]);
+        }
+        extras.water_mask = {255};
+        extras.metadata = terrain_metadata(spec, id, 0, true);
+        return encode_quantized_mesh(quantize_mesh(filler, bounds), extras);
+    }
+
+    std::string
+    data_terrain(const TileId& id, const TerrainSpec& spec, const LonLatBox& bounds) const {
+        // The 15-bit quantization moves vertices by up to half a step (about 1/65534 of the
+        // tile) across the slope: it is measured at every sample, and where it takes the tile
+        // past its eps the worst samples become vertices (quantize_within). The border lines
+        // keep the vertices the zoom's eps gave them, so neighbouring tiles still share them.
+        const double eps = eps_for_zoom(id.z);
+        const double target = budget_at(id.z, eps).drawn_bound;
+        MeshedTile t = mesh_at(id, eps, false);
+        if (t.mesh.triangle_count() == 0) {
+            throw NotFound("tile " + tile_name(id) + ": no triangle from the DEM"); // filler
+        }
+        cover_rectangle(t.mesh, bounds);
+        double error = 0;
+        std::size_t uncovered = 0;
+        const QuantizedMesh q = quantize_within(
+            t.mesh, bounds, t.raster, t.source_pixels, target - t.budget.sag, error, &uncovered);
+        if (uncovered > 0) {
+            log::debug("tile " + tile_name(id) + ": " + std::to_string(uncovered) +
+                       " sample(s) lie in no quantized triangle");
+        }
+        double published = error + t.budget.sag;
+        published = std::max(published, target);
+        if (published > target + 1e-9 && guarantee() == Guarantee::SourcePixels) {
+            log::warn("tile " + tile_name(id) + ".terrain: 15-bit quantization leaves it " +
+                      std::to_string(published) + " m from the DEM, above the zoom's eps " +
+                      std::to_string(target) + " m; its metadata publishes the larger bound");
+        }
+        QuantizedMeshExtras extras;
+        extras.normals = vertex_normals(t, id);
+        extras.water_mask = terrain_water_mask(t.raster, bounds);
+        extras.metadata = terrain_metadata(spec, id, published, false);
+        return encode_quantized_mesh(q, extras);
+    }
+
+    // The ellipsoid's unit normal at lon/lat (degrees), ECEF.
+    static std::array<double, 3> up_vector(double lon, double lat) {
+        constexpr double kDeg = 3.14159265358979323846 / 180;
+        return {std::cos(lat * kDeg) * std::cos(lon * kDeg),
+                std::cos(lat * kDeg) * std::sin(lon * kDeg),
+                std::sin(lat * kDeg)};
+    }
+
+    // Unit ECEF normals of the DEM surface at each vertex, from the slope of the source's
+    // heights at the vertex's lon/lat: a pure function of where the vertex is and of the source,
+    // so a vertex two tiles share gets the same normal in both. Pixel layers: central
+    // differences one pixel either side on the bilinear surface of the source's pixels (voids
+    // left out of the weights); other layers: central differences on the zoom's lattice.
+    std::vector<std::array<double, 3>> vertex_normals(const MeshedTile& t, const TileId& id) const {
+        constexpr double kDeg = 3.14159265358979323846 / 180;
+        constexpr double kA = 6378137.0, kE2 = 6.69437999014e-3;
+        const TileMesh& m = t.mesh;
+        std::vector<std::array<double, 3>> out(m.vertex_count());
+        // Gradient (dh/dx, dh/dy) per vertex in source units per degree, or per lattice step.
+        std::vector<double> gx(m.vertex_count()), gy(m.vertex_count());
+        double step_x = 0, step_y = 0; // degrees between the two probes / 2
+        if (pixels_ && pixels_->lonlat) {
+            const PixelGrid& g = *pixels_;
+            const LonLatBox b = tile_bounds(options_.scheme, id);
+            const auto col = [&g](double x) { return (x - g.x0) / g.dx - 0.5; };
+            const auto row = [&g](double y) { return (g.y0 - y) / g.dy - 0.5; };
+            const std::int64_t c0 = static_cast<std::int64_t>(std::floor(col(b.west))) - 3;
+            const std::int64_t r0 = static_cast<std::int64_t>(std::floor(row(b.north))) - 3;
+            const int w = static_cast<int>(std::ceil(col(b.east)) - static_cast<double>(c0)) + 4;
+            const int h = static_cast<int>(std::ceil(row(b.south)) - static_cast<double>(r0)) + 4;
+            const std::vector<double> px = source_->read_pixels(c0, r0, w, h);
+            const auto bilinear = [&](double fc, double fr, double& value) {
+                const double ic = std::floor(fc), ir = std::floor(fr);
+                const double tc = fc - ic, tr = fr - ir;
+                double sum = 0, total = 0;
+                for (int k = 0; k < 4; ++k) {
+                    const std::int64_t c = static_cast<std::int64_t>(ic) + (k & 1) - c0;
+                    const std::int64_t r = static_cast<std::int64_t>(ir) + (k >> 1) - r0;
+                    if (c < 0 || r < 0 || c >= w || r >= h) {
+                        continue;
+                    }
+                    const double v = px[static_cast<std::size_t>(r * w + c)];
+                    const double weight = ((k & 1) ? tc : 1 - tc) * ((k >> 1) ? tr : 1 - tr);
+                    if (!std::isnan(v) && weight > 0) {
+                        sum += weight * v, total += weight;
+                    }
+                }
+                if (total <= 0) {
+                    return false;
+                }
+                value = sum / total;
+                return true;
+            };
+            step_x = g.dx, step_y = g.dy;
+            for (std::size_t v = 0; v < m.vertex_count(); ++v) {
+                const double fc = col(m.x[v]), fr = row(m.y[v]);
+                double e = 0, wst = 0, n = 0, s = 0;
+                gx[v] = bilinear(fc + 1, fr, e) && bilinear(fc - 1, fr, wst) ? (e - wst) : 0.0;
+                gy[v] = bilinear(fc, fr - 1, n) && bilinear(fc, fr + 1, s) ? (n - s) : 0.0;
+            }
+        } else {
+            const int n = options_.tile_size;
+            const std::int64_t c0 = tile_first_column(options_.scheme, id, n) - 1;
+            const std::int64_t r0 = tile_first_row(options_.scheme, id, n) - 1;
+            const int w = n + 3;
+            const LatticeBlock block = source_->sample(options_.scheme, id.z, n, c0, r0, w, w);
+            step_x = step_y =
+                (tile_bounds(options_.scheme, id).east - tile_bounds(options_.scheme, id).west) / n;
+            const auto at = [&](int i, int j, double& value) {
+                if (i < 0 || j < 0 || i >= w || j >= w) {
+                    return false;
+                }
+                const std::size_t k = static_cast<std::size_t>(j) * w + static_cast<std::size_t>(i);
+                value = block.heights[k];
+                return block.valid[k] != 0;
+            };
+            for (std::size_t v = 0; v < m.vertex_count(); ++v) {
+                double column = 0, r = 0;
+                lonlat_to_grid(t.raster, {m.x[v], m.y[v]}, column, r);
+                const int i = static_cast<int>(std::lround(column)) + 1;
+                const int j = static_cast<int>(std::lround(r)) + 1;
+                double e = 0, wst = 0, nn = 0, s = 0;
+                gx[v] = at(i + 1, j, e) && at(i - 1, j, wst) ? (e - wst) : 0.0;
+                gy[v] = at(i, j - 1, nn) && at(i, j + 1, s) ? (nn - s) : 0.0;
+            }
+        }
+        for (std::size_t v = 0; v < m.vertex_count(); ++v) {
+            const double lon = m.x[v] * kDeg, lat = m.y[v] * kDeg;
+            const double sl = std::sin(lat), cl = std::cos(lat);
+            const double w2 = 1 - kE2 * sl * sl;
+            const double metres_lon = kA / std::sqrt(w2) * cl * kDeg; // per degree
+            const double metres_lat = kA * (1 - kE2) / (w2 * std::sqrt(w2)) * kDeg;
+            const double de = gx[v] / (2 * step_x * std::max(metres_lon, 1e-6));
+            const double dn = gy[v] / (2 * step_y * metres_lat);
+            const std::array<double, 3> east{-std::sin(lon), std::cos(lon), 0};
+            const std::array<double, 3> north{-sl * std::cos(lon), -sl * std::sin(lon), cl};
+            const std::array<double, 3> up{cl * std::cos(lon), cl * std::sin(lon), sl};
+            std::array<double, 3> nv{};
+            double len = 0;
+            for (int k = 0; k < 3; ++k) {
+                nv[k] = up[k] - de * east[k] - dn * north[k];
+                len += nv[k] * nv[k];
+            }
+            for (double& c : nv) {
+                c /= std::sqrt(len);
+            }
+            out[v] = nv;
+        }
+        return out;
+    }
+
     void validate_options() {
         const auto& o = options_;
         if (o.name.empty() || !std::all_of(o.name.begin(), o.name.end(), [](char c) {

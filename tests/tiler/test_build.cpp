@@ -15,6 +15,7 @@
 #include <cmath>
 #include <csignal>
 #include <cstdlib>
+#include <cstring>
 #include <fcntl.h>
 #include <filesystem>
 #include <fstream>
@@ -775,4 +776,87 @@ TEST_CASE("build -o under a directory that does not exist fails with exit 3 and 
                          " does not exist; create it first") != std::string::npos);
         CHECK_FALSE(fs::exists(dir.path / "missing"));
     }
+}
+
+TEST_CASE("build --formats glb,terrain writes layer.json and every terrain tile it lists from "
+          "zoom 0, the layer's own bytes, into both stores; a --bbox build writes no layer.json") {
+    BuildDir dir;
+    const auto dem = write_dem(dir / "dem.tif");
+    const Run a = run(args(dem, dir / "out", {"--formats", "glb,terrain", "--json"}), dir);
+    INFO(a.err);
+    REQUIRE(a.code == 0);
+    CHECK(a.out.find("\"tileset_written\":true") != std::string::npos);
+    const fs::path root = dir.path / "out/terrain";
+    REQUIRE(fs::exists(root / "layer.json"));
+
+    LayerOptions o; // as kSmall
+    o.sources = {dem};
+    o.tile_size = 32;
+    o.min_zoom = 7;
+    o.max_zoom = 9;
+    const auto layer = Layer::open(o);
+    std::string layer_json;
+    REQUIRE(layer->document("layer.json", layer_json));
+    CHECK(slurp(root / "layer.json") == layer_json);
+    CHECK(layer_json.find("\"format\":\"quantized-mesh-1.0\"") != std::string::npos);
+
+    // Every available range of layer.json, read back from its text, is on disk.
+    std::map<std::string, std::string> expected;
+    std::size_t level = 0, at = layer_json.find("\"available\":[") + 13;
+    const std::size_t end = layer_json.find("]]", at);
+    while (at < end) {
+        const std::size_t open = layer_json.find('[', at);
+        const std::size_t close = layer_json.find(']', open);
+        const std::string ranges = layer_json.substr(open, close - open);
+        for (std::size_t r = ranges.find("startX"); r != std::string::npos;
+             r = ranges.find("startX", r + 1)) {
+            const auto field = [&](const char* name) {
+                return std::stoll(ranges.substr(ranges.find(name, r) + std::strlen(name) + 2));
+            };
+            for (auto y = field("startY"); y <= field("endY"); ++y) {
+                for (auto x = field("startX"); x <= field("endX"); ++x) {
+                    const TileId id{static_cast<int>(level), x, y};
+                    expected[std::to_string(level) + "/" + std::to_string(x) + "/" +
+                             std::to_string(y) + ".terrain"] =
+                        layer->make_tile(id, Format::Terrain);
+                }
+            }
+        }
+        ++level;
+        at = close + 1;
+    }
+    CHECK(level == static_cast<std::size_t>(layer->max_zoom() + 1));
+    std::map<std::string, std::string> written;
+    for (const auto& [rel, bytes] : tree(root)) {
+        if (rel.ends_with(".terrain")) {
+            written[rel] = bytes;
+        }
+    }
+    CHECK(written.size() == expected.size());
+    CHECK((written == expected));
+    CHECK(written.count("0/0/0.terrain") == 1);
+    CHECK(written.count("0/1/0.terrain") == 1);
+
+    const Run b = run(args(dem, dir / "out.sqlite", {"--formats", "glb,terrain"}), dir);
+    INFO(b.err);
+    REQUIRE(b.code == 0);
+    std::size_t in_db = 0;
+    for (const auto& [key, bytes] : sqlite_tiles(dir / "out.sqlite")) {
+        const std::string prefix = "terrain/terrain/-1/";
+        if (key.rfind(prefix, 0) == 0) {
+            std::string zxy = key.substr(prefix.size());
+            zxy.pop_back();
+            CHECK(expected.at(zxy + ".terrain") == bytes);
+            ++in_db;
+        }
+    }
+    CHECK(in_db == expected.size());
+    CHECK(TileStore::open(dir / "out.sqlite")->get_document("terrain", "layer.json") == layer_json);
+
+    const Run part =
+        run(args(dem, dir / "part", {"--formats", "terrain", "--bbox", "7.3,46.3,7.4,46.4"}), dir);
+    INFO(part.err);
+    REQUIRE(part.code == 0);
+    CHECK(part.err.find("layer.json not written") != std::string::npos);
+    CHECK_FALSE(fs::exists(dir.path / "part/terrain/layer.json"));
 }

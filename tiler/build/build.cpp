@@ -4,6 +4,8 @@
 // only writer: it drains the queue into the store in batches and draws the progress.
 #include "tiler/build/build.hpp"
 
+#include "tiler/formats/quantized_mesh.hpp"
+
 #include "core/error.hpp"
 #include "tiler/dem_tiles.hpp"
 #include "tiler/json_number.hpp"
@@ -284,6 +286,51 @@ void add_ranges(Plan& plan,
     }
 }
 
+bool wants_terrain(const Layer& layer, const BuildOptions& o) {
+    return layer.options().scheme == Scheme::Geodetic &&
+           std::find(o.formats.begin(), o.formats.end(), Format::Terrain) != o.formats.end();
+}
+
+TerrainSpec terrain_spec_of(const Layer& layer) {
+    return TerrainSpec{layer.options().name,
+                       layer.min_zoom(),
+                       layer.max_zoom(),
+                       layer.data_bounds(),
+                       [&layer](int z) { return layer.eps_for_zoom(z); }};
+}
+
+// Whether tile id is made in format f: DEM and terrain tiles wherever planned, mesh tiles where
+// the layer may have data.
+bool makes(const Layer& layer, Format f, const TileId& id) {
+    return is_dem_format(f) || f == Format::Terrain || layer.may_have_tile(id);
+}
+
+// Writes layer.json when every tile it lists as available is in the store (a --bbox build
+// leaves some out: then it is not written, and a warning says so). Returns whether it was.
+bool write_layer_json(const Layer& layer, TileStore& store, const std::string& name) {
+    const TerrainSpec spec = terrain_spec_of(layer);
+    for (int z = 0; z <= spec.max_zoom; ++z) {
+        const TileRange r = terrain_available(spec, z);
+        for (std::int64_t y = r.y0; y <= r.y1; ++y) {
+            for (std::int64_t x = r.x0; x <= r.x1; ++x) {
+                if (!store.contains(TileKey{name, TileId{z, x, y}, Format::Terrain, -1})) {
+                    log::warn("build: layer.json not written: it lists terrain tile " +
+                              tile_name(TileId{z, x, y}) +
+                              ", which is not in the store (build it, e.g. with --resume and no "
+                              "--bbox)");
+                    return false;
+                }
+            }
+        }
+    }
+    std::string text;
+    layer.document("layer.json", text);
+    store.put_document(name, "layer.json", text);
+    log::info("build: wrote layer.json (quantized-mesh terrain, zooms 0.." +
+              std::to_string(spec.max_zoom) + ")");
+    return true;
+}
+
 // Mesh tiles first (when a mesh format is asked for), then the DEM pyramid's tiles (when a DEM
 // format is).
 Plan make_plan(const Layer& layer, const BuildOptions& o) {
@@ -292,9 +339,14 @@ Plan make_plan(const Layer& layer, const BuildOptions& o) {
         std::any_of(o.formats.begin(), o.formats.end(), [](Format f) { return !is_dem_format(f); });
     const bool dem = std::any_of(o.formats.begin(), o.formats.end(), is_dem_format);
     if (mesh) {
-        add_ranges(plan, o, o.layer.scheme, layer.min_zoom(), layer.max_zoom(), [&](int z) {
-            return layer.tiles_at(z);
-        });
+        // Terrain tiles start at zoom 0 (filler below min_zoom) and at zoom 0 cover both roots;
+        // elsewhere they are the tiles covering the data, as the mesh tiles.
+        const bool terrain = wants_terrain(layer, o);
+        const TerrainSpec spec = terrain_spec_of(layer);
+        add_ranges(
+            plan, o, o.layer.scheme, terrain ? 0 : layer.min_zoom(), layer.max_zoom(), [&](int z) {
+                return terrain ? terrain_available(spec, z) : layer.tiles_at(z);
+            });
     }
     plan.mesh_total = plan.total;
     if (dem) {
@@ -561,7 +613,8 @@ void check_options(const BuildOptions& o) {
                          ": expected 1..1024 (or 0 for one per core)");
     }
     if (o.formats.empty()) {
-        throw InputError("build: --formats: name at least one of glb, drc, terrarium, mapbox");
+        throw InputError(
+            "build: --formats: name at least one of glb, drc, terrarium, mapbox, terrain");
     }
     for (std::size_t i = 0; i < o.formats.size(); ++i) {
         for (std::size_t j = 0; j < i; ++j) {
@@ -709,8 +762,11 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
     }
 
     const Plan plan = make_plan(*layer, o);
-    const bool mesh_formats =
-        std::any_of(o.formats.begin(), o.formats.end(), [](Format f) { return !is_dem_format(f); });
+    // The 3D Tiles tileset lists glb (or drc) tiles; terrain tiles have their layer.json.
+    const bool mesh_formats = std::any_of(o.formats.begin(), o.formats.end(), [](Format f) {
+        return f == Format::Glb || f == Format::Drc;
+    });
+    const bool terrain = wants_terrain(*layer, o);
     const bool check_present = o.resume || o.shard || o.finalize;
     BuildSummary summary;
 
@@ -736,6 +792,9 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
         store->clean_up(name);
         summary.tileset_written =
             mesh_formats && write_tileset(*layer, *store, name, o.bbox.has_value());
+        if (terrain) {
+            write_layer_json(*layer, *store, name);
+        }
         if (mesh_formats && !summary.tileset_written) {
             throw IoError(where + ": --finalize: tiles the tileset lists are missing although "
                                   "every shard reported (see the warning above); run each shard "
@@ -762,8 +821,9 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
                             ? o.threads
                             : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
     log::info("build: " + std::to_string(summary.planned) + " tiles, zoom " +
-              std::to_string(layer->min_zoom()) + ".." + std::to_string(layer->max_zoom()) + ", " +
-              std::to_string(threads) + " thread(s), into " + store->describe() +
+              std::to_string(layer->min_zoom()) + ".." + std::to_string(layer->max_zoom()) +
+              (terrain ? " (terrain from zoom 0)" : "") + ", " + std::to_string(threads) +
+              " thread(s), into " + store->describe() +
               (o.shard ? ", shard " + std::to_string(o.shard->index) + "/" +
                              std::to_string(o.shard->count)
                        : ""));
@@ -790,14 +850,14 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
                 if (!mine(id)) {
                     continue;
                 }
-                if (!dem && !layer->may_have_tile(id)) {
+                if (!dem && !layer->may_have_tile(id) && !wants_terrain(*layer, o)) {
                     ++counters.empty;
                     continue;
                 }
                 if (check_present) {
                     bool all = true;
                     for (Format f : o.formats) {
-                        if (is_dem_format(f) == dem) {
+                        if (is_dem_format(f) == dem && makes(*layer, f, id)) {
                             all = all && store->contains(TileKey{name, id, f, -1});
                         }
                     }
@@ -809,14 +869,20 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
                 Made made{id, {}, dem};
                 try {
                     for (Format f : o.formats) {
-                        if (is_dem_format(f) == dem) {
-                            made.tiles.emplace_back(
-                                f, dem ? make_dem_tile(*layer, id, f) : layer->make_tile(id, f));
+                        if (is_dem_format(f) == dem && makes(*layer, f, id)) {
+                            try {
+                                made.tiles.emplace_back(f,
+                                                        dem ? make_dem_tile(*layer, id, f)
+                                                            : layer->make_tile(id, f));
+                            } catch (const NotFound&) {
+                                // no data for this format here; the others may have some
+                            }
                         }
                     }
-                } catch (const NotFound&) {
-                    ++counters.empty;
-                    continue;
+                    if (made.tiles.empty()) {
+                        ++counters.empty;
+                        continue;
+                    }
                 } catch (const IoError&) {
                     throw; // the DEM became unreadable: no point going on
                 } catch (const std::exception& e) {
@@ -935,6 +1001,9 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
             // A build of DEM tiles alone has no mesh tiles for a tileset to list.
             summary.tileset_written =
                 mesh_formats && write_tileset(*layer, *store, name, o.bbox.has_value());
+            if (terrain) {
+                write_layer_json(*layer, *store, name);
+            }
         }
     }
     summary.over_eps = static_cast<std::int64_t>(layer->tiles_over_eps());

@@ -3,7 +3,8 @@
 namespace tb::tiler {
 
 std::optional<Format> parse_format(std::string_view name) {
-    for (Format f : {Format::Glb, Format::Drc, Format::Terrarium, Format::Mapbox}) {
+    for (Format f :
+         {Format::Glb, Format::Drc, Format::Terrarium, Format::Mapbox, Format::Terrain}) {
         if (name == format_name(f)) {
             return f;
         }
@@ -21,6 +22,8 @@ const char* format_name(Format format) {
         return "terrarium";
     case Format::Mapbox:
         return "mapbox";
+    case Format::Terrain:
+        return "terrain";
     }
     return "?";
 }
@@ -32,6 +35,9 @@ const char* extension(Format format) {
 const char* media_type(Format format) {
     if (is_dem_format(format)) {
         return "image/png";
+    }
+    if (format == Format::Terrain) {
+        return "application/vnd.quantized-mesh";
     }
     return format == Format::Glb ? "model/gltf-binary" : "application/octet-stream";
 }

@@ -11,14 +11,18 @@ enum class Format {
     // Raster DEM tiles (EPSG:3857 XYZ PNG, tiler/dem_tiles.hpp), one per height encoding:
     Terrarium, // h = R * 256 + G + B / 256 - 32768
     Mapbox,    // Terrain-RGB: h = -10000 + (R * 65536 + G * 256 + B) * 0.1
+    // quantized-mesh-1.0 for CesiumJS's globe (tiler/formats/quantized_mesh.hpp), geodetic
+    // layers only, with every extension; the server strips those a request does not accept.
+    Terrain,
 };
 
-// "glb" | "drc" | "terrarium" | "mapbox": how configs, build options, stores and caches name a
-// format (unique per format).
+// "glb" | "drc" | "terrarium" | "mapbox" | "terrain": how configs, build options, stores and caches
+// name a format (unique per format).
 std::optional<Format> parse_format(std::string_view name);
 const char* format_name(Format format);
-const char* extension(Format format);  // "glb" | "drc" | "png"
-const char* media_type(Format format); // model/gltf-binary | application/octet-stream | image/png
+const char* extension(Format format); // "glb" | "drc" | "png" | "terrain"
+// model/gltf-binary | application/octet-stream | image/png | application/vnd.quantized-mesh
+const char* media_type(Format format);
 // True for the raster DEM formats (terrarium, mapbox), which tile EPSG:3857 whatever the
 // layer's scheme.
 bool is_dem_format(Format format);

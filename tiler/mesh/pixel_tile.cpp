@@ -291,7 +291,7 @@ PixelTile make_pixel_tile(const DemSource& source,
     return t;
 }
 
-TileMesh mesh_pixel_tile(const PixelTile& t, const ErrorBudget& budget) {
+TileMesh mesh_pixel_tile(const PixelTile& t, const ErrorBudget& budget, bool drop_voids) {
     const core::HeightGrid& grid = t.raster.grid;
     const int w = grid.width, h = grid.height;
     TB_ASSERT(budget.max_edge == 0 || budget.max_edge >= kMinPixelEdge - 1e-12);
@@ -384,7 +384,8 @@ TileMesh mesh_pixel_tile(const PixelTile& t, const ErrorBudget& budget) {
         for (std::size_t tr = 0; tr < mesh.triangle_count(); ++tr) {
             const core::Index a = mesh.triangles[3 * tr], b = mesh.triangles[3 * tr + 1],
                               c = mesh.triangles[3 * tr + 2];
-            if (holds_valid_sample(grid, mesh.points[a], mesh.points[b], mesh.points[c])) {
+            if (!drop_voids ||
+                holds_valid_sample(grid, mesh.points[a], mesh.points[b], mesh.points[c])) {
                 triangle(id[a], id[b], id[c]);
             }
         }
@@ -474,7 +475,7 @@ TileMesh mesh_pixel_tile(const PixelTile& t, const ErrorBudget& budget) {
         bool keep = true;
         for (int q = 0; q < 3; ++q) {
             const auto [c, r] = key_of[out.triangles[e + static_cast<std::size_t>(q)]];
-            keep = keep && (!is_line(c, r) || value_of(c, r).valid);
+            keep = keep && (!drop_voids || !is_line(c, r) || value_of(c, r).valid);
         }
         if (keep) {
             kept.insert(kept.end(),

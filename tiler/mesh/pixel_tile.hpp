@@ -65,7 +65,9 @@ ErrorBudget pixel_error_budget(double eps, Scheme scheme, const PixelGrid& pixel
 // The tile's mesh: core::triangulate_strips on the block at budget.mesh_eps with locked borders,
 // the border strips and corners zipped on. Every valid pixel of the block is within
 // budget.mesh_eps of it; triangles holding no valid pixel, and strip triangles touching a border
-// vertex with no data beside it, are left out; every edge is at most budget.max_edge pixels.
-TileMesh mesh_pixel_tile(const PixelTile& tile, const ErrorBudget& budget);
+// vertex with no data beside it, are left out (with drop_voids; without, every triangle is kept
+// and voids are drawn at their filled heights, as a globe that must cover the tile needs);
+// every edge is at most budget.max_edge pixels.
+TileMesh mesh_pixel_tile(const PixelTile& tile, const ErrorBudget& budget, bool drop_voids = true);
 
 } // namespace tb::tiler

@@ -1,0 +1,217 @@
+// quantized-mesh terrain over real loopback HTTP: layer.json, the Accept negotiation of
+// extensions (checked with the independent reader of tests/tiler/qm_reader.hpp), Vary and
+// gzip, filler at zoom 0, and the errors of tiles outside the scheme or beyond max zoom.
+#include "../tiler/qm_reader.hpp"
+#include "server_fixture.hpp"
+#include "tiler/formats/quantized_mesh.hpp"
+#include "tiler/layer.hpp"
+#include "tiler/log.hpp"
+
+#include <doctest/doctest.h>
+#include <nlohmann/json.hpp>
+
+#include <set>
+
+namespace {
+
+using namespace tb;
+using test::RunningServer;
+using test::TempDir;
+
+struct TerrainFixture {
+    TempDir dir;
+    std::shared_ptr<const tiler::Layer> layer;
+    TerrainFixture() {
+        log::set_level(log::Level::Warn);
+        test::write_dem(dir / "hills.asc");
+        layer = tiler::Layer::open(test::test_layer_options(dir / "hills.asc", "hills"));
+    }
+};
+
+TerrainFixture& fixture() {
+    static TerrainFixture f;
+    return f;
+}
+
+std::string terrain_url(const tiler::TileId& id) {
+    return "/hills/" + std::to_string(id.z) + "/" + std::to_string(id.x) + "/" +
+           std::to_string(id.y) + ".terrain";
+}
+
+std::vector<int> extension_ids(const std::string& body) {
+    std::vector<int> ids;
+    for (const auto& e : tb_qm::read(body).extensions) {
+        ids.push_back(e.id);
+    }
+    return ids;
+}
+
+constexpr const char* kCesiumAccept =
+    "application/vnd.quantized-mesh;extensions=octvertexnormals-watermask-metadata,"
+    "application/octet-stream;q=0.9,*/*;q=0.01";
+
+TEST_CASE("layer.json over HTTP lists every zoom from 0, the extensions and the terrain URL") {
+    auto& f = fixture();
+    RunningServer server({{f.layer, {tiler::Format::Glb, tiler::Format::Terrain}, nullptr}});
+    auto c = server.client();
+    auto layers = c.Get("/layers");
+    REQUIRE(layers);
+    const auto list = nlohmann::json::parse(layers->body);
+    CHECK(list["layers"][0]["layer_json"] == "/hills/layer.json");
+    auto res = c.Get("/hills/layer.json");
+    REQUIRE(res);
+    REQUIRE(res->status == 200);
+    CHECK(res->get_header_value("Content-Type") == "application/json");
+    const auto j = nlohmann::json::parse(res->body);
+    CHECK(j["format"] == "quantized-mesh-1.0");
+    CHECK(j["scheme"] == "tms");
+    CHECK(j["projection"] == "EPSG:4326");
+    CHECK(j["tiles"][0] == "{z}/{x}/{y}.terrain");
+    CHECK(j["extensions"] == nlohmann::json({"octvertexnormals", "watermask", "metadata"}));
+    CHECK(j["metadataAvailability"] == tiler::kMetadataLevels);
+    REQUIRE(j["available"].size() == static_cast<std::size_t>(f.layer->max_zoom() + 1));
+    CHECK(j["available"][0][0] ==
+          nlohmann::json::parse(R"({"startX":0,"startY":0,"endX":1,"endY":0})"));
+    // From min_zoom on, what is available is exactly the layer's own tiles.
+    for (int z = f.layer->min_zoom(); z <= f.layer->max_zoom(); ++z) {
+        const auto r = f.layer->tiles_at(z);
+        const auto& a = j["available"][static_cast<std::size_t>(z)][0];
+        CHECK(a["startX"] == r.x0);
+        CHECK(a["endX"] == r.x1);
+        CHECK(a["startY"] == r.y0);
+        CHECK(a["endY"] == r.y1);
+    }
+    CHECK(j["data"]["minzoom"] == f.layer->min_zoom());
+}
+
+TEST_CASE("the metadata of the two root tiles lists, level by level, what layer.json lists") {
+    auto& f = fixture();
+    RunningServer server({{f.layer, {tiler::Format::Terrain}, nullptr}});
+    auto c = server.client();
+    auto doc = c.Get("/hills/layer.json");
+    REQUIRE(doc);
+    const auto available = nlohmann::json::parse(doc->body)["available"];
+    // Tiles per level, from the roots' metadata extension (child availability).
+    std::vector<std::set<std::pair<std::int64_t, std::int64_t>>> listed(available.size());
+    for (const std::int64_t x : {0, 1}) {
+        auto res = c.Get(terrain_url({0, x, 0}).c_str(),
+                         {{"Accept", "application/vnd.quantized-mesh;extensions=metadata"}});
+        REQUIRE(res);
+        const tb_qm::Tile t = tb_qm::read(res->body);
+        REQUIRE(t.extensions.size() == 1);
+        const auto meta = nlohmann::json::parse(t.extensions[0].data.substr(4));
+        CHECK(meta["filler"] == true);
+        const auto& levels = meta["available"];
+        CHECK(levels.size() == std::min<std::size_t>(tiler::kMetadataLevels, available.size() - 1));
+        for (std::size_t k = 0; k < levels.size(); ++k) {
+            for (const auto& r : levels[k]) {
+                for (std::int64_t y = r["startY"]; y <= r["endY"].get<std::int64_t>(); ++y) {
+                    for (std::int64_t tx = r["startX"]; tx <= r["endX"].get<std::int64_t>(); ++tx) {
+                        // Under this root: x within its half of the level.
+                        CHECK((tx >> (k + 1)) == x);
+                        listed[k + 1].insert({tx, y});
+                    }
+                }
+            }
+        }
+    }
+    for (std::size_t z = 1; z < available.size() && z <= tiler::kMetadataLevels; ++z) {
+        std::set<std::pair<std::int64_t, std::int64_t>> want;
+        for (const auto& r : available[z]) {
+            for (std::int64_t y = r["startY"]; y <= r["endY"].get<std::int64_t>(); ++y) {
+                for (std::int64_t x = r["startX"]; x <= r["endX"].get<std::int64_t>(); ++x) {
+                    want.insert({x, y});
+                }
+            }
+        }
+        CAPTURE(z);
+        CHECK(listed[z] == want);
+        CHECK_FALSE(want.empty());
+    }
+}
+
+TEST_CASE("a terrain tile carries exactly the extensions its Accept header names, gzipped, "
+          "with Vary: Accept") {
+    auto& f = fixture();
+    RunningServer server({{f.layer, {tiler::Format::Terrain}, nullptr}});
+    auto c = server.client();
+    const auto r = f.layer->tiles_at(f.layer->max_zoom());
+    const tiler::TileId id{f.layer->max_zoom(), r.x0, r.y0};
+    const std::string full = f.layer->make_tile(id, tiler::Format::Terrain);
+
+    const auto get = [&](const char* accept) {
+        httplib::Headers h{{"Accept-Encoding", "gzip"}};
+        if (accept) {
+            h.emplace("Accept", accept);
+        }
+        auto res = c.Get(terrain_url(id).c_str(), h);
+        REQUIRE(res);
+        REQUIRE(res->status == 200);
+        CHECK(res->get_header_value("Content-Type") == "application/vnd.quantized-mesh");
+        CHECK(res->get_header_value("Content-Encoding") == "gzip");
+        CHECK(res->get_header_value("Vary").find("Accept") != std::string::npos);
+        CHECK(res->get_header_value("Vary").find("Accept-Encoding") != std::string::npos);
+        return res->body; // cpp-httplib has undone the gzip coding
+    };
+    // CesiumJS's own Accept: every extension, the layer's bytes as made.
+    const std::string all = get(kCesiumAccept);
+    CHECK(all == full);
+    CHECK(extension_ids(all) == std::vector<int>{1, 2, 4});
+    // No Accept, or one naming no extension: none.
+    const std::string bare = get(nullptr);
+    CHECK(extension_ids(bare).empty());
+    CHECK(get("application/octet-stream,*/*") == bare);
+    // Unknown names are dropped, known ones kept.
+    CHECK(extension_ids(get("application/vnd.quantized-mesh;extensions=watermask-foo-bar")) ==
+          std::vector<int>{2});
+    CHECK(extension_ids(get("application/vnd.quantized-mesh; extensions=metadata-"
+                            "octvertexnormals")) == std::vector<int>{1, 4});
+    // The tile without extensions is the full tile's prefix.
+    CHECK(full.compare(0, bare.size(), bare) == 0);
+
+    // Without Accept-Encoding the body is sent as is.
+    auto plain = c.Get(terrain_url(id).c_str());
+    REQUIRE(plain);
+    CHECK(plain->get_header_value("Content-Encoding").empty());
+    CHECK(plain->body == bare);
+}
+
+TEST_CASE("terrain tiles: filler at zoom 0, 404 beyond max zoom, 400 outside the scheme, 404 "
+          "for a layer without terrain") {
+    auto& f = fixture();
+    RunningServer server(
+        {{f.layer, {tiler::Format::Terrain}, nullptr},
+         {tiler::Layer::open(test::test_layer_options(fixture().dir / "hills.asc", "meshonly")),
+          {tiler::Format::Glb},
+          nullptr}});
+    auto c = server.client();
+    for (const tiler::TileId id : {tiler::TileId{0, 0, 0}, tiler::TileId{0, 1, 0}}) {
+        auto res = c.Get(terrain_url(id).c_str(), {{"Accept", kCesiumAccept}});
+        REQUIRE(res);
+        CHECK(res->status == 200);
+        const tb_qm::Tile t = tb_qm::read(res->body);
+        CHECK(t.vertex_count > 4);
+        CHECK(t.edges[0].size() > 1);
+    }
+    const int beyond = f.layer->max_zoom() + 1;
+    auto deep = c.Get(terrain_url({beyond, 0, 0}).c_str());
+    REQUIRE(deep);
+    CHECK(deep->status == 404);
+    for (const tiler::TileId id :
+         {tiler::TileId{0, 2, 0}, tiler::TileId{0, 0, 1}, tiler::TileId{3, 16, 0}}) {
+        auto res = c.Get(terrain_url(id).c_str());
+        REQUIRE(res);
+        CHECK(res->status == 400);
+    }
+    auto bad = c.Get("/hills/1/x/0.terrain");
+    REQUIRE(bad);
+    CHECK(bad->status == 400);
+    auto none = c.Get("/meshonly/0/0/0.terrain");
+    REQUIRE(none);
+    CHECK(none->status == 404);
+    auto no_json = c.Get("/meshonly/layer.json");
+    REQUIRE(no_json);
+    CHECK(no_json->status == 404);
+}
+
+} // namespace
