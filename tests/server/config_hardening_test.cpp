@@ -12,30 +12,10 @@
 
 namespace {
 
+using tb::test::config_error;
+using tb::test::run_command;
 using tb::test::TempDir;
 using tb::test::write_file;
-
-std::string config_error(const std::string& text, const std::string& path) {
-    try {
-        tb::config::parse_config(text, path);
-    } catch (const tb::InputError& e) {
-        return e.what();
-    }
-    return "";
-}
-
-int run_command(const std::string& command, std::string& output) {
-    output.clear();
-    FILE* pipe = popen((command + " 2>&1").c_str(), "r");
-    REQUIRE(pipe);
-    char buf[4096];
-    std::size_t n = 0;
-    while ((n = fread(buf, 1, sizeof buf, pipe)) > 0) {
-        output.append(buf, n);
-    }
-    const int status = pclose(pipe);
-    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
 
 std::string layer_with(const std::string& dem, const std::string& extra) {
     return R"({"layers": [{"name": "t", "sources": [")" + dem + "\"]" + extra + "}]}";

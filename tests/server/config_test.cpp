@@ -12,32 +12,10 @@
 
 namespace {
 
+using tb::test::config_error;
+using tb::test::run_command;
 using tb::test::TempDir;
 using tb::test::write_file;
-
-// The message of the InputError parse_config throws, or "" when it parses.
-std::string config_error(const std::string& text, const std::string& path) {
-    try {
-        tb::config::parse_config(text, path);
-    } catch (const tb::InputError& e) {
-        return e.what();
-    }
-    return "";
-}
-
-// Runs a shell command, returns its exit code and fills `output` with stdout+stderr.
-int run_command(const std::string& command, std::string& output) {
-    output.clear();
-    FILE* pipe = popen((command + " 2>&1").c_str(), "r");
-    REQUIRE(pipe);
-    char buf[4096];
-    std::size_t n = 0;
-    while ((n = fread(buf, 1, sizeof buf, pipe)) > 0) {
-        output.append(buf, n);
-    }
-    const int status = pclose(pipe);
-    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
 
 } // namespace
 

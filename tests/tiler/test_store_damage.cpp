@@ -5,6 +5,8 @@
 #include "tiler/stores/checksum.hpp"
 #include "tiler/stores/store.hpp"
 
+#include "tests/tiler/test_raster_util.hpp"
+
 #include <doctest/doctest.h>
 
 #include <filesystem>
@@ -22,18 +24,7 @@ using namespace tb::tiler;
 
 namespace {
 
-struct TempDir {
-    fs::path path;
-    TempDir() {
-        std::string tmpl = (fs::temp_directory_path() / "tb-damage-XXXXXX").string();
-        REQUIRE(::mkdtemp(tmpl.data()) != nullptr);
-        path = tmpl;
-    }
-    ~TempDir() {
-        std::error_code ec;
-        fs::remove_all(path, ec);
-    }
-};
+using TempDir = tb_test::ScratchDir;
 
 std::string random_bytes(std::size_t n, unsigned seed) {
     std::mt19937 rng(seed);
