@@ -2,6 +2,7 @@
 // the nodata field; each gets one clear line naming the file and the JSON pointer.
 #include "config/config.hpp"
 #include "core/error.hpp"
+#include "config_util.hpp"
 #include "server_fixture.hpp"
 
 #include <doctest/doctest.h>

@@ -2,6 +2,7 @@
 // reported together with its JSON pointer.
 #include "config/config.hpp"
 #include "core/error.hpp"
+#include "config_util.hpp"
 #include "server_fixture.hpp"
 
 #include <doctest/doctest.h>

@@ -2,20 +2,15 @@
 // Shared helpers of the server tests: temp dirs, a small generated DEM, an in-process server
 // on an ephemeral loopback port, and Prometheus metric lookup.
 #include "config/config.hpp"
-#include "core/error.hpp"
 #include "server/http_server.hpp"
 #include "server/metrics.hpp"
 #include "server/tile_service.hpp"
 
-#include <doctest/doctest.h>
 #include <httplib.h>
-
-#include <sys/wait.h>
 
 #include <atomic>
 #include <chrono>
 #include <cmath>
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -139,30 +134,6 @@ inline double metric(int port, const std::string& name) {
     httplib::Client c("127.0.0.1", port);
     auto res = c.Get("/metrics");
     return res && res->status == 200 ? metric(res->body, name) : -2;
-}
-
-// The message of the InputError parse_config throws, or "" when it parses.
-inline std::string config_error(const std::string& text, const std::string& path) {
-    try {
-        tb::config::parse_config(text, path);
-    } catch (const tb::InputError& e) {
-        return e.what();
-    }
-    return "";
-}
-
-// Runs a shell command, returns its exit code and fills `output` with stdout+stderr.
-inline int run_command(const std::string& command, std::string& output) {
-    output.clear();
-    FILE* pipe = popen((command + " 2>&1").c_str(), "r");
-    REQUIRE(pipe);
-    char buf[4096];
-    std::size_t n = 0;
-    while ((n = fread(buf, 1, sizeof buf, pipe)) > 0) {
-        output.append(buf, n);
-    }
-    const int status = pclose(pipe);
-    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
 } // namespace tb::test
