@@ -102,6 +102,19 @@ void exec(const std::string& path, const char* sql) {
     sqlite3_close(db);
 }
 
+// The store holds a damaged copy of kKey and of tileset.json: neither is served or counted,
+// and putting `good` again repairs both.
+void require_damaged_then_repaired(TileStore& store, const std::string& good) {
+    CHECK_FALSE(store.get(kKey).has_value());
+    CHECK_FALSE(store.contains(kKey));
+    CHECK_FALSE(store.get_document("terrain", "tileset.json").has_value());
+    store.put(kKey, good);
+    store.put_document("terrain", "tileset.json", good);
+    CHECK(store.get(kKey) == good);
+    CHECK(store.contains(kKey));
+    CHECK(store.get_document("terrain", "tileset.json") == good);
+}
+
 } // namespace
 
 TEST_CASE("the store checksum is zlib's CRC-32 and its sidecar names it with the size") {
@@ -124,14 +137,7 @@ TEST_CASE("the directory store never serves a damaged tile or document, and a pu
         CHECK(slurp(dir.path / "out/terrain/5/31/.7.glb.crc32") == checksum_sidecar(good));
         spill(tile, damage.apply(good));
         spill(doc, damage.apply(good));
-        CHECK_FALSE(store->get(kKey).has_value());
-        CHECK_FALSE(store->contains(kKey));
-        CHECK_FALSE(store->get_document("terrain", "tileset.json").has_value());
-        store->put(kKey, good);
-        store->put_document("terrain", "tileset.json", good);
-        CHECK(store->get(kKey) == good);
-        CHECK(store->contains(kKey));
-        CHECK(store->get_document("terrain", "tileset.json") == good);
+        require_damaged_then_repaired(*store, good);
     }
 }
 
@@ -167,14 +173,7 @@ TEST_CASE("the SQLite store never serves a damaged tile or document, and a put r
         overwrite_sqlite_tile(path, damage.apply(good));
         exec(path, "UPDATE documents SET data=substr(data, 1, length(data) - 1)");
         auto store = TileStore::open(path);
-        CHECK_FALSE(store->get(kKey).has_value());
-        CHECK_FALSE(store->contains(kKey));
-        CHECK_FALSE(store->get_document("terrain", "tileset.json").has_value());
-        store->put(kKey, good);
-        store->put_document("terrain", "tileset.json", good);
-        CHECK(store->get(kKey) == good);
-        CHECK(store->contains(kKey));
-        CHECK(store->get_document("terrain", "tileset.json") == good);
+        require_damaged_then_repaired(*store, good);
     }
 }
 
