@@ -74,9 +74,11 @@ int start_server(Child& child, std::vector<std::string> args, const std::string&
 
 TEST_CASE("SIGTERM during tile generation loses no request in flight and exits 0") {
     test::TempDir dir;
-    test::write_dem(dir / "hills.asc");
+    // Tiles are meshed on the DEM's own pixels, so a fine DEM (1025 x 1025 over one degree, about
+    // 720 x 720 pixels per z8 tile) with two generation threads makes eight cold tiles take a
+    // while: every request is in flight before the first ones are done.
+    test::write_dem(dir / "hills.asc", 1025);
     const std::string config = dir / "serve.json";
-    // Big tiles, two generation threads: eight cold tiles take a while to make.
     test::write_file(config, R"({
       "server": {"threads": 2, "log_level": "info"},
       "layers": [{"name": "hills", "sources": ["hills.asc"], "tile_size": 512, "min_zoom": 5,
