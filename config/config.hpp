@@ -31,7 +31,8 @@ struct LayerConfig {
                                           tiler::Format::Drc,
                                           tiler::Format::Terrarium,
                                           tiler::Format::Mapbox,
-                                          tiler::Format::Terrain};
+                                          tiler::Format::Terrain,
+                                          tiler::Format::Terrain3d};
     std::optional<std::string> store; // directory or *.sqlite / *.db; none: memory only
 };
 

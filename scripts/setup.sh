@@ -11,11 +11,13 @@ BUILD_PACKAGES=(
     build-essential cmake pkg-config ccache
     libgdal-dev gdal-bin libgeographiclib-dev libdraco-dev libcpp-httplib-dev
     nlohmann-json3-dev doctest-dev libsqlite3-dev zlib1g-dev libbrotli-dev proj-data
+    libmeshoptimizer-dev
     clang-14 libclang-rt-14-dev
     ca-certificates chromium
 )
 RUNTIME_PACKAGES=(
     libgdal32 libgeographiclib23 libdraco7 libcpp-httplib0.11 libsqlite3-0 zlib1g libbrotli1
+    libmeshoptimizer2d
     proj-data
     ca-certificates curl
 )

@@ -5,6 +5,7 @@
 #include "core/error.hpp"
 #include "tiler/dem_tiles.hpp"
 #include "tiler/formats/quantized_mesh.hpp"
+#include "tiler/formats/terrain_tiles.hpp"
 #include "tiler/json_number.hpp"
 #include "tiler/log.hpp"
 #include "tiler/tile_grid.hpp"
@@ -757,6 +758,12 @@ struct HttpServer::Impl {
                     served.formats.end()) {
                 out << ",\"layer_json\":\"/" << o.name << "/layer.json\"";
             }
+            if (o.scheme == tiler::Scheme::Geodetic &&
+                std::find(served.formats.begin(),
+                          served.formats.end(),
+                          tiler::Format::Terrain3d) != served.formats.end()) {
+                out << ",\"terrain_tileset\":\"/" << o.name << "/terrain/tileset.json\"";
+            }
             out << dem_json(served) << "}";
             first = false;
         }
@@ -1022,6 +1029,14 @@ struct HttpServer::Impl {
                        serve_terrain(req, res);
                    });
 
+        // 3D Tiles terrain content for Cesium3DTilesTerrainProvider:
+        // /{layer}/terrain/{root}/{level}/{x}/{y}.glb (its tileset and subtrees are documents).
+        server.Get(R"(/+([^/]+)/+terrain/+([^/]*)/+([^/]*)/+([^/]*)/+([^/]*)\.glb)",
+                   [this](const httplib::Request& req, httplib::Response& res) {
+                       t_request.route = "terrain3d";
+                       serve_terrain3d(req, res);
+                   });
+
         server.Get(R"(/+([^/]+)/+(.+))",
                    [this](const httplib::Request& req, httplib::Response& res) {
                        t_request.route = "document";
@@ -1087,6 +1102,32 @@ struct HttpServer::Impl {
         // The extensions sent depend on Accept, the coding on Accept-Encoding.
         res.headers.erase("Vary");
         res.set_header("Vary", "Accept, Accept-Encoding");
+    }
+
+    void serve_terrain3d(const httplib::Request& req, httplib::Response& res) {
+        std::int64_t root = 0, level = 0, x = 0, y = 0;
+        tiler::TileId id;
+        if (!parse_index(req.matches[2].str(), 1, root) ||
+            !parse_index(req.matches[3].str(), 2, level) ||
+            !parse_index(req.matches[4].str(), 10, x) ||
+            !parse_index(req.matches[5].str(), 10, y) || level > tiler::kMaxZoom ||
+            !tiler::terrain_tile_id(static_cast<int>(root), static_cast<int>(level), x, y, id)) {
+            throw InputError("3D Tiles terrain tile coordinates must be "
+                             "/terrain/{root}/{level}/{x}/{y}.glb with root 0 or 1, level up to " +
+                             std::to_string(tiler::kMaxZoom) + ", and x, y below 2^level");
+        }
+        const auto blob = tiles.tile(req.matches[1].str(), id, tiler::Format::Terrain3d, {});
+        if (!blob) {
+            res.set_header("Retry-After", std::to_string(kRetryAfterSeconds));
+            send_error(res, 503, "the server is busy generating tiles; retry shortly");
+            return;
+        }
+        send_blob(req,
+                  res,
+                  *blob,
+                  tiler::media_type(tiler::Format::Terrain3d),
+                  kTileCacheControl,
+                  &metrics);
     }
 
     void serve_tile(const httplib::Request& req, httplib::Response& res) {

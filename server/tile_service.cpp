@@ -334,7 +334,7 @@ std::shared_ptr<const Blob> TileService::tile(const std::string& layer_name,
     if (tiler::is_dem_format(format)) {
         TB_ASSERT(eps.level == -1); // DEM tiles have no eps
         check_dem_tile(layer, id);
-    } else if (format == tiler::Format::Terrain) {
+    } else if (tiler::is_terrain_format(format)) {
         check_terrain_tile(layer, id);
     } else {
         check_mesh_tile(layer, id, eps);
@@ -506,6 +506,11 @@ std::shared_ptr<const Blob> TileService::document(const std::string& layer_name,
         std::find(served->formats.begin(), served->formats.end(), tiler::Format::Terrain) ==
             served->formats.end()) {
         throw NotFound("layer '" + layer_name + "' does not serve terrain (quantized-mesh)");
+    }
+    if (path.rfind("terrain/", 0) == 0 &&
+        std::find(served->formats.begin(), served->formats.end(), tiler::Format::Terrain3d) ==
+            served->formats.end()) {
+        throw NotFound("layer '" + layer_name + "' does not serve 3D Tiles terrain (terrain3d)");
     }
     Impl& s = *impl_;
     const std::string key = "d/" + layer_name + "/" + path;

@@ -6,6 +6,7 @@
 #include "core/triangulate.hpp"
 #include "tiler/formats/encode.hpp"
 #include "tiler/formats/quantized_mesh.hpp"
+#include "tiler/formats/terrain_tiles.hpp"
 #include "tiler/geodesy.hpp"
 #include "tiler/log.hpp"
 #include "tiler/mesh/pixel_tile.hpp"
@@ -120,17 +121,95 @@ public:
             out = terrain_layer_json(terrain_spec());
             return true;
         }
+        if (path.rfind("terrain/", 0) == 0) {
+            return options_.scheme == Scheme::Geodetic && terrain_document(path.substr(8), out);
+        }
         return tileset_document(spec, path, out);
     }
 
+    // 3D Tiles terrain documents under terrain/: "tileset.json" and the subtrees
+    // "{root}/{level}/{x}/{y}.subtree".
+    bool terrain_document(const std::string& path, std::string& out) const {
+        const TerrainTilesetSpec spec = terrain_tileset_spec();
+        if (path == "tileset.json") {
+            out = terrain_tileset_json(spec);
+            return true;
+        }
+        constexpr std::string_view kSuffix = ".subtree";
+        if (path.size() <= kSuffix.size() ||
+            path.compare(path.size() - kSuffix.size(), kSuffix.size(), kSuffix) != 0) {
+            return false;
+        }
+        std::int64_t part[4] = {0, 0, 0, 0};
+        std::size_t at = 0;
+        const std::size_t end = path.size() - kSuffix.size();
+        for (int k = 0; k < 4; ++k) {
+            const std::size_t stop = k < 3 ? path.find('/', at) : end;
+            if (stop == std::string::npos || stop > end || stop == at || stop - at > 10) {
+                return false;
+            }
+            for (std::size_t c = at; c < stop; ++c) {
+                if (path[c] < '0' || path[c] > '9') {
+                    return false;
+                }
+                part[k] = part[k] * 10 + (path[c] - '0');
+            }
+            at = stop + 1;
+        }
+        if (part[0] > 1 || part[1] > kMaxZoom) {
+            return false;
+        }
+        return terrain_subtree(
+            spec, static_cast<int>(part[0]), static_cast<int>(part[1]), part[2], part[3], out);
+    }
+
+    // The largest vertical distance between the geoid and any height of the DEM.
+    double relief() const {
+        return std::max(max_height_ - kGeoidLowest, kGeoidHighest - min_height_);
+    }
+    // The bound a filler tile (on the geoid) publishes: the relief over the data, 0 where the
+    // tile holds no source pixel.
+    double filler_error(const TileId& id) const {
+        const LonLatBox b = tile_bounds(Scheme::Geodetic, id);
+        const bool over_data = b.west < footprint_.east && b.east > footprint_.west &&
+                               b.south < footprint_.north && b.north > footprint_.south;
+        return over_data ? relief() : 0.0;
+    }
+
+    // What the terrain tileset publishes. Heights: every tile's vertices lie within the
+    // layer's range or on the geoid (filler, and the corners covering a rectangle beyond the
+    // DEM), whose undulation stays within -107..86 m. Level errors: a tile at a meshed zoom is
+    // held to its zoom's bound (data_terrain measures what its glb draws); a filler tile over
+    // the data is as far from it as the DEM's heights are from the geoid.
+    TerrainTilesetSpec terrain_tileset_spec() const {
+        TerrainTilesetSpec spec;
+        spec.terrain = terrain_spec();
+        spec.min_height = std::min(min_height_, kGeoidLowest);
+        spec.max_height = std::max(max_height_, kGeoidHighest);
+        spec.root_error = relief() * std::exp2(std::max(min_zoom_ - 1, 0));
+        for (int z = min_zoom_; z <= max_zoom_; ++z) {
+            spec.root_error = std::max(spec.root_error,
+                                       budget_at(z, eps_for_zoom(z)).drawn_bound * std::exp2(z));
+        }
+        const double lo = spec.min_height, hi = spec.max_height;
+        spec.bounds = [lo, hi](const TileId& id) {
+            return terrain_tile_bounds(tile_bounds(Scheme::Geodetic, id), lo, hi);
+        };
+        return spec;
+    }
+
     std::string make_tile(const TileId& id, Format format, EpsChoice eps) const override {
-        if (format == Format::Terrain) {
+        if (is_terrain_format(format)) {
             if (eps.level >= 0) {
                 throw InputError("layer '" + options_.name +
-                                 "': quantized-mesh terrain tiles have only their zoom's eps "
+                                 "': globe terrain tiles have only their zoom's eps "
                                  "(CesiumJS picks levels itself); drop ?eps");
             }
-            return make_terrain(id);
+            TerrainTile tile = terrain_tile(id);
+            if (format == Format::Terrain) {
+                return encode_quantized_mesh(tile.mesh, tile.extras);
+            }
+            return encode_terrain_glb(tile);
         }
         double value = 0;
         if (eps.level < 0) {
@@ -149,9 +228,9 @@ public:
     TileRaster make_raster(const TileId& id) const override;
 
     std::string make_tile_at(const TileId& id, Format format, double eps) const override {
-        if (format == Format::Terrain) {
+        if (is_terrain_format(format)) {
             throw InputError("tile " + tile_name(id) +
-                             ": quantized-mesh tiles are made at their zoom's eps only");
+                             ": globe terrain tiles are made at their zoom's eps only");
         }
         const MeshedTile t = mesh_tile_at(id, eps);
         EncodeReport report;
@@ -318,13 +397,14 @@ private:
                            }};
     }
 
-    // A quantized-mesh tile (tiler/formats/quantized_mesh.hpp) with every extension: meshed
-    // from the DEM where the layer has data, flat filler on the geoid elsewhere at zooms up to
-    // max_zoom (CesiumJS never asks for a tile whose parent is missing).
-    std::string make_terrain(const TileId& id) const {
+    // A globe terrain tile's content (tiler/formats/terrain_tiles.hpp), encoded as
+    // quantized-mesh or 3D Tiles terrain: meshed from the DEM where the layer has data, flat
+    // filler on the geoid elsewhere at zooms up to max_zoom (CesiumJS never asks for a tile whose
+    // parent is missing).
+    TerrainTile terrain_tile(const TileId& id) const {
         if (options_.scheme != Scheme::Geodetic) {
             throw InputError("layer '" + options_.name +
-                             "': quantized-mesh terrain needs the geodetic scheme");
+                             "': globe terrain needs the geodetic scheme");
         }
         if (!is_valid(options_.scheme, id)) {
             throw InputError("tile " + tile_name(id) + ": outside the geodetic scheme (z 0.." +
@@ -345,22 +425,28 @@ private:
             }
         }
         const TileMesh filler = terrain_filler(bounds);
-        QuantizedMeshExtras extras;
-        extras.normals.resize(filler.vertex_count());
+        TerrainTile tile;
+        tile.filler = true;
+        tile.extras.normals.resize(filler.vertex_count());
         for (std::size_t v = 0; v < filler.vertex_count(); ++v) {
-            extras.normals[v] = up_vector(filler.x[v], filler.y[v]);
+            tile.extras.normals[v] = up_vector(filler.x[v], filler.y[v]);
         }
-        extras.water_mask = {255};
-        extras.metadata = terrain_metadata(spec, id, 0, true);
-        return encode_quantized_mesh(quantize_mesh(filler, bounds), extras);
+        tile.extras.water_mask = {255};
+        tile.extras.metadata = terrain_metadata(spec, id, 0, true);
+        tile.mesh = quantize_mesh(filler, bounds);
+        tile.glb_error = filler_error(id);
+        return tile;
     }
 
-    std::string
+    TerrainTile
     data_terrain(const TileId& id, const TerrainSpec& spec, const LonLatBox& bounds) const {
         // The 15-bit quantization moves vertices by up to half a step (about 1/65534 of the
         // tile) across the slope: it is measured at every sample, and where it takes the tile
-        // past its eps the worst samples become vertices (quantize_within). The border lines
+        // past its bound the worst samples become vertices (quantize_within). The border lines
         // keep the vertices the zoom's eps gave them, so neighbouring tiles still share them.
+        // A share of the bound is kept for the 3D Tiles glb's 16-bit positions: the surface it
+        // draws is measured at every sample too, and if it does not fit, the share grows and the
+        // mesh is refined again.
         const double eps = eps_for_zoom(id.z);
         const double target = budget_at(id.z, eps).drawn_bound;
         MeshedTile t = mesh_at(id, eps, false);
@@ -368,26 +454,49 @@ private:
             throw NotFound("tile " + tile_name(id) + ": no triangle from the DEM"); // filler
         }
         cover_rectangle(t.mesh, bounds);
-        double error = 0;
+        TerrainTile tile;
+        double error = 0, glb_error = 0;
         std::size_t uncovered = 0;
-        const QuantizedMesh q = quantize_within(
-            t.mesh, bounds, t.raster, t.source_pixels, target - t.budget.sag, error, &uncovered);
+        for (double share : {1.0 / 16, 1.0 / 8, 1.0 / 4}) {
+            uncovered = 0;
+            tile.mesh = quantize_within(t.mesh,
+                                        bounds,
+                                        t.raster,
+                                        t.source_pixels,
+                                        target - t.budget.sag - share * target,
+                                        error,
+                                        &uncovered);
+            glb_error =
+                surface_error(terrain_glb_surface(tile.mesh, false), t.raster, t.source_pixels);
+            if (std::max(error, glb_error) + t.budget.sag <= target) {
+                break;
+            }
+        }
+        if (glb_error + t.budget.sag > target) {
+            tile.exact_positions = true;
+            glb_error =
+                surface_error(terrain_glb_surface(tile.mesh, true), t.raster, t.source_pixels);
+        }
         if (uncovered > 0) {
             log::debug("tile " + tile_name(id) + ": " + std::to_string(uncovered) +
                        " sample(s) lie in no quantized triangle");
         }
-        double published = error + t.budget.sag;
-        published = std::max(published, target);
-        if (published > target + 1e-9 && guarantee() == Guarantee::SourcePixels) {
-            log::warn("tile " + tile_name(id) + ".terrain: 15-bit quantization leaves it " +
-                      std::to_string(published) + " m from the DEM, above the zoom's eps " +
-                      std::to_string(target) + " m; its metadata publishes the larger bound");
+        const double published = std::max(error + t.budget.sag, target);
+        tile.glb_error = std::max(glb_error + t.budget.sag, target);
+        if (std::max(published, tile.glb_error) > target + 1e-9) {
+            log::warn("terrain tile " + tile_name(id) + ": quantization leaves it " +
+                      std::to_string(error + t.budget.sag) + " m (quantized-mesh) and " +
+                      std::to_string(glb_error + t.budget.sag) +
+                      " m (3D Tiles) from the DEM, above the zoom's bound " +
+                      std::to_string(target) + " m; the tile itself publishes the larger bound");
+            std::lock_guard lock(measured_mutex_);
+            ++over_eps_;
         }
-        QuantizedMeshExtras extras;
-        extras.normals = vertex_normals(t, id);
-        extras.water_mask = terrain_water_mask(t.raster, bounds);
-        extras.metadata = terrain_metadata(spec, id, published, false);
-        return encode_quantized_mesh(q, extras);
+        tile.error = published;
+        tile.extras.normals = vertex_normals(t, id);
+        tile.extras.water_mask = terrain_water_mask(t.raster, bounds);
+        tile.extras.metadata = terrain_metadata(spec, id, published, false);
+        return tile;
     }
 
     // The ellipsoid's unit normal at lon/lat (degrees), ECEF.

@@ -1,6 +1,8 @@
 // CesiumJS globe terrain check page: a layer's quantized-mesh tiles through
 // CesiumTerrainProvider.fromUrl (its layer.json), asking for vertex normals, the water mask and
-// the metadata extension, with a procedural grid draped over the globe (no imagery download).
+// the metadata extension, or with provider=3dtiles its 3D Tiles terrain through
+// Cesium3DTilesTerrainProvider.fromUrl (terrain/tileset.json), with a procedural grid draped over
+// the globe (no imagery download).
 // Query: server=URL (tile server origin, default this page's), layer=NAME (required), lon, lat
 // and height (camera), pitch (degrees below the horizon, default 50). State goes to window.tbTerrain for the browser
 // tests: ready once the provider is made, errors from its errorEvent, levels requested.
@@ -86,9 +88,16 @@
   };
 
   state.ready = (async () => {
-    const provider = await Cesium.CesiumTerrainProvider.fromUrl(`${server}/${layer}/`, {
-      requestVertexNormals: true, requestWaterMask: true, requestMetadata: true,
-    });
+    const provider = params.get('provider') === '3dtiles'
+      ? await Cesium.Cesium3DTilesTerrainProvider.fromUrl(`${server}/${layer}/terrain/tileset.json`, {
+        requestVertexNormals: true,
+      })
+      : await Cesium.CesiumTerrainProvider.fromUrl(`${server}/${layer}/`, {
+        requestVertexNormals: true, requestWaterMask: true, requestMetadata: true,
+      });
+    state.providerName = provider instanceof Cesium.Cesium3DTilesTerrainProvider
+      ? 'Cesium3DTilesTerrainProvider'
+      : provider instanceof Cesium.CesiumTerrainProvider ? 'CesiumTerrainProvider' : 'other';
     provider.errorEvent.addEventListener((e) => state.errors.push(String(e && e.message || e)));
     const request = provider.requestTileGeometry.bind(provider);
     provider.requestTileGeometry = (x, y, level, req) => {

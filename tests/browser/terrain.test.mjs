@@ -1,6 +1,8 @@
-// CesiumJS globe terrain from the real `terrabound serve`: CesiumTerrainProvider.fromUrl reads
-// the layer's layer.json and draws its quantized-mesh tiles in Debian's headless Chromium with
-// no failed tile, console error or request leaving 127.0.0.1, asking for every extension; and
+// CesiumJS globe terrain from the real `terrabound serve`, through both of its terrain providers:
+// CesiumTerrainProvider.fromUrl reads the layer's layer.json and draws its quantized-mesh tiles
+// (asking for every extension), Cesium3DTilesTerrainProvider.fromUrl reads terrain/tileset.json
+// and draws its implicit 3D Tiles terrain (subtrees, meshopt glb). Each in Debian's headless
+// Chromium with no failed tile, console error or request leaving 127.0.0.1; and
 // sampleTerrainMostDetailed at source pixel centres returns GDAL's reading of the DEM plus
 // PROJ's EGM96 undulation (gdaltransform) within the finest zoom's eps.
 import { test, before, after } from 'node:test';
@@ -75,16 +77,25 @@ function toEllipsoid(points) {
   });
 }
 
-async function openTerrainPage(lon, lat, height, pitch = 50) {
+// The two providers: quantized-mesh ('qm') and 3D Tiles terrain ('3dtiles').
+const PROVIDERS = [
+  { name: 'qm', cls: 'CesiumTerrainProvider', tile: /\.terrain$/, shot: 'cesium-terrain' },
+  { name: '3dtiles', cls: 'Cesium3DTilesTerrainProvider', tile: /\/terrain\/[01]\/\d+\/\d+\/\d+\.glb$/, shot: 'cesium-3dtiles-terrain' },
+];
+
+async function openTerrainPage(lon, lat, height, pitch = 50, provider = PROVIDERS[0]) {
   const { page, record } = await openPage(browser.context);
   const accepts = [];
+  const tiles = [];
   page.on('request', (req) => {
     if (req.url().endsWith('.terrain')) accepts.push(req.headers().accept || '');
+    if (provider.tile.test(req.url())) tiles.push(req.url());
   });
-  const url = `${server.url}/web/test-terrain.html?layer=${layer.name}&lon=${lon}&lat=${lat}&height=${height}&pitch=${pitch}`;
+  const url = `${server.url}/web/test-terrain.html?layer=${layer.name}&provider=${provider.name}&lon=${lon}&lat=${lat}&height=${height}&pitch=${pitch}`;
   await page.goto(url, { waitUntil: 'load' });
   await page.evaluate(() => window.tbTerrain.ready);
-  return { page, record, accepts };
+  assert.equal(await page.evaluate(() => window.tbTerrain.providerName), provider.cls);
+  return { page, record, accepts, tiles };
 }
 
 test('/layers names the layer.json of a geodetic layer', { skip: skip || false }, async () => {
@@ -94,9 +105,28 @@ test('/layers names the layer.json of a geodetic layer', { skip: skip || false }
   assert.equal(doc.available.length, layer.max_zoom + 1);
 });
 
-test('CesiumTerrainProvider draws the layer as globe terrain with every extension, no failed tile and no console error',
+test('/layers names the 3D Tiles terrain tileset of a geodetic layer', { skip: skip || false }, async () => {
+  assert.equal(layer.terrain_tileset, `/${layer.name}/terrain/tileset.json`);
+  const doc = await fetchJson(`${server.url}${layer.terrain_tileset}`);
+  assert.equal(doc.asset.version, '1.1');
+  assert.equal(doc.root.children.length, 2);
+  for (const child of doc.root.children) {
+    assert.equal(child.implicitTiling.subdivisionScheme, 'QUADTREE');
+    assert.equal(child.implicitTiling.availableLevels, layer.max_zoom + 1);
+  }
+  const props = doc.schema.classes.tile.properties;
+  assert.deepEqual(Object.values(props).map((p) => p.semantic).sort(), [
+    'TILE_BOUNDING_SPHERE', 'TILE_HORIZON_OCCLUSION_POINT',
+    'TILE_MAXIMUM_HEIGHT', 'TILE_MINIMUM_HEIGHT']);
+  assert.equal(props.boundingSphere.componentType, 'FLOAT64');
+  assert.equal(props.boundingSphere.array, true);
+  assert.equal(props.boundingSphere.count, 4);
+});
+
+for (const provider of PROVIDERS) {
+test(`${provider.cls} draws the layer as globe terrain${provider.name === 'qm' ? ' with every extension' : ''}, no failed tile and no console error`,
   { skip: skip || false, timeout: 180000 }, async (t) => {
-    const { page, record, accepts } = await openTerrainPage(11.8, 57.7, 30000, 60);
+    const { page, record, accepts, tiles } = await openTerrainPage(11.8, 57.7, 30000, 60, provider);
     const loaded = await page.evaluate(() => window.tbTerrain.waitLoaded(90000));
     const state = await page.evaluate(() => ({
       errors: window.tbTerrain.errors, requested: window.tbTerrain.requested,
@@ -105,15 +135,19 @@ test('CesiumTerrainProvider draws the layer as globe terrain with every extensio
     }));
     t.diagnostic(`loaded in ${(loaded.ms / 1000).toFixed(1)} s; tiles requested by level ${JSON.stringify(state.requested)}`);
     assert.deepEqual(state.errors, [], 'terrain provider errors');
-    assert.ok(state.normals && state.water && state.metadata, 'layer.json offers all three extensions');
-    assert.ok(accepts.length > 0, 'terrain tiles were requested');
-    for (const a of accepts) {
-      assert.match(a, /application\/vnd\.quantized-mesh;extensions=octvertexnormals-watermask-metadata/);
+    assert.ok(tiles.length > 0, 'terrain tiles were requested');
+    if (provider.name === 'qm') {
+      assert.ok(state.normals && state.water && state.metadata, 'layer.json offers all three extensions');
+      for (const a of accepts) {
+        assert.match(a, /application\/vnd\.quantized-mesh;extensions=octvertexnormals-watermask-metadata/);
+      }
+    } else {
+      assert.ok(state.normals, 'the provider decodes vertex normals');
     }
     const levels = Object.keys(state.requested).map(Number);
     assert.ok(levels.includes(0), 'the root tiles were loaded');
     assert.ok(Math.max(...levels) >= layer.min_zoom, 'tiles meshed from the DEM were loaded');
-    const shot = await saveScreenshot(page, 'cesium-terrain.png');
+    const shot = await saveScreenshot(page, `${provider.shot}.png`);
 
     // The same view on the bare ellipsoid differs: the terrain (relief, normals, water) shows.
     await page.evaluate(() => window.tbTerrain.setTerrain(false));
@@ -130,13 +164,15 @@ test('CesiumTerrainProvider draws the layer as globe terrain with every extensio
     const close = await page.evaluate(() => ({ ...window.tbTerrain.requested }));
     t.diagnostic(`close view: tiles requested by level ${JSON.stringify(close)}`);
     assert.ok(Object.keys(close).map(Number).includes(layer.max_zoom), 'the finest zoom was loaded');
-    await saveScreenshot(page, 'cesium-terrain-close.png');
+    await saveScreenshot(page, `${provider.shot}-close.png`);
     assert.deepEqual(await page.evaluate(() => window.tbTerrain.errors), []);
-    assertClean(record, 'cesium terrain');
+    assertClean(record, provider.cls);
     await page.close();
   });
+}
 
-test('sampleTerrainMostDetailed at source pixel centres is within the finest eps of the DEM plus EGM96',
+for (const provider of PROVIDERS) {
+test(`${provider.cls}: sampleTerrainMostDetailed at source pixel centres is within the finest eps of the DEM plus EGM96`,
   { skip: skip || false, timeout: 180000 }, async (t) => {
     const grid = await readWithGdal(DEM);
     const doc = await fetchJson(`${server.url}${layer.layer_json}`);
@@ -156,7 +192,7 @@ test('sampleTerrainMostDetailed at source pixel centres is within the finest eps
     }
     assert.ok(points.length > 150);
     const expected = await toEllipsoid(points);
-    const { page, record } = await openTerrainPage(11.5, 57.5, 200000);
+    const { page, record } = await openTerrainPage(11.5, 57.5, 200000, 50, provider);
     const heights = await page.evaluate((p) => window.tbTerrain.sample(p), points.map(([lon, lat]) => [lon, lat]));
     let worst = 0;
     let where = null;
@@ -169,6 +205,7 @@ test('sampleTerrainMostDetailed at source pixel centres is within the finest eps
     assert.ok(worst <= eps, `worst error ${worst} m exceeds the finest eps ${eps} m at ${where}`);
     // The relief is real: the sampled heights span more than a few eps.
     assert.ok(Math.max(...heights) - Math.min(...heights) > 10 * eps, 'sampled heights are all alike');
-    assertClean(record, 'sampleTerrainMostDetailed');
+    assertClean(record, `${provider.cls} sampleTerrainMostDetailed`);
     await page.close();
   });
+}

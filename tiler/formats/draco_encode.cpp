@@ -298,27 +298,6 @@ std::string glb_json(const std::array<double, 3>& translation,
     return j;
 }
 
-std::string glb_container(std::string json, std::string_view bin) {
-    while (json.size() % 4 != 0) {
-        json.push_back(' ');
-    }
-    const std::size_t bin_padded = (bin.size() + 3) / 4 * 4;
-    const std::size_t total = 12 + 8 + json.size() + 8 + bin_padded;
-    TB_ASSERT(total <= std::numeric_limits<std::uint32_t>::max());
-    std::string out;
-    out.reserve(total);
-    put_u32(out, kGlbMagic);
-    put_u32(out, 2);
-    put_u32(out, static_cast<std::uint32_t>(total));
-    put_u32(out, static_cast<std::uint32_t>(json.size()));
-    put_u32(out, kChunkJson);
-    out += json;
-    put_u32(out, static_cast<std::uint32_t>(bin_padded));
-    put_u32(out, kChunkBin);
-    out += bin;
-    out.append(bin_padded - bin.size(), '\0');
-    return out;
-}
 
 // A tile whose data are all voids: a glb with an empty scene (no buffer, no BIN chunk); a raw
 // Draco tile has no such form, so there is no .drc of it.
@@ -367,6 +346,28 @@ void check_lattice_fits(const TileRaster& raster, const ErrorBudget& budget) {
 }
 
 } // namespace
+
+std::string glb_container(std::string json, std::string_view bin) {
+    while (json.size() % 4 != 0) {
+        json.push_back(' ');
+    }
+    const std::size_t bin_padded = (bin.size() + 3) / 4 * 4;
+    const std::size_t total = 12 + 8 + json.size() + 8 + bin_padded;
+    TB_ASSERT(total <= std::numeric_limits<std::uint32_t>::max());
+    std::string out;
+    out.reserve(total);
+    put_u32(out, kGlbMagic);
+    put_u32(out, 2);
+    put_u32(out, static_cast<std::uint32_t>(total));
+    put_u32(out, static_cast<std::uint32_t>(json.size()));
+    put_u32(out, kChunkJson);
+    out += json;
+    put_u32(out, static_cast<std::uint32_t>(bin_padded));
+    put_u32(out, kChunkBin);
+    out += bin;
+    out.append(bin_padded - bin.size(), '\0');
+    return out;
+}
 
 ErrorBudget error_budget(double eps) {
     if (!std::isfinite(eps) || !(eps > 0)) {

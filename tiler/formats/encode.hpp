@@ -8,6 +8,7 @@
 
 #include <functional>
 #include <string>
+#include <string_view>
 
 namespace tb::tiler {
 
@@ -116,6 +117,10 @@ std::string encode_tile(const TileRaster& raster,
                         const core::Mesh& mesh,
                         Format format,
                         const ErrorBudget& budget);
+
+// A binary glTF (.glb): the 12-byte header, the JSON chunk (padded with spaces) and, unless
+// `bin` is empty, the BIN chunk (padded with zeros).
+std::string glb_container(std::string json, std::string_view bin);
 
 // What the tileset writer needs to know about a layer.
 struct TilesetSpec {

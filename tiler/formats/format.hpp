@@ -14,17 +14,23 @@ enum class Format {
     // quantized-mesh-1.0 for CesiumJS's globe (tiler/formats/quantized_mesh.hpp), geodetic
     // layers only, with every extension; the server strips those a request does not accept.
     Terrain,
+    // 3D Tiles terrain for CesiumJS's Cesium3DTilesTerrainProvider (tiler/formats/terrain_tiles.hpp):
+    // glb with EXT_meshopt_compression under the layer's terrain/ tileset, geodetic layers only.
+    Terrain3d,
 };
 
-// "glb" | "drc" | "terrarium" | "mapbox" | "terrain": how configs, build options, stores and caches
+// "glb" | "drc" | "terrarium" | "mapbox" | "terrain" | "terrain3d": how configs, build options, stores and caches
 // name a format (unique per format).
 std::optional<Format> parse_format(std::string_view name);
 const char* format_name(Format format);
-const char* extension(Format format); // "glb" | "drc" | "png" | "terrain"
+const char* extension(Format format); // "glb" | "drc" | "png" | "terrain" (terrain3d: "glb")
 // model/gltf-binary | application/octet-stream | image/png | application/vnd.quantized-mesh
 const char* media_type(Format format);
 // True for the raster DEM formats (terrarium, mapbox), which tile EPSG:3857 whatever the
 // layer's scheme.
 bool is_dem_format(Format format);
+// True for the globe terrain formats (terrain, terrain3d): every zoom from 0, filler where the
+// layer has no data, the geodetic scheme only.
+bool is_terrain_format(Format format);
 
 } // namespace tb::tiler

@@ -79,21 +79,21 @@ struct Probe {
     double lon = 0, lat = 0;
 };
 
-// Triangles of q bucketed on a square grid over u/v, for point location.
+// Triangles of a surface mesh bucketed on a square grid over u/v, for point location.
 class TriangleBuckets {
 public:
     // About two triangles per cell.
-    explicit TriangleBuckets(const QuantizedMesh& q)
-        : q_(q),
+    explicit TriangleBuckets(SurfaceMesh mesh)
+        : q_(std::move(mesh)),
           cells_per_side_(std::clamp(
-              static_cast<int>(std::sqrt(static_cast<double>(q.triangles.size()) / 6)), 16, 1024)) {
+              static_cast<int>(std::sqrt(static_cast<double>(q_.triangles.size()) / 6)), 16, 1024)) {
         cells_.resize(static_cast<std::size_t>(cells_per_side_) * cells_per_side_);
-        for (std::size_t t = 0; t * 3 < q.triangles.size(); ++t) {
+        for (std::size_t t = 0; t * 3 < q_.triangles.size(); ++t) {
             double u0 = 1e9, u1 = -1e9, v0 = 1e9, v1 = -1e9;
             for (int k = 0; k < 3; ++k) {
-                const std::uint32_t i = q.triangles[3 * t + static_cast<std::size_t>(k)];
-                u0 = std::min<double>(u0, q.u[i]), u1 = std::max<double>(u1, q.u[i]);
-                v0 = std::min<double>(v0, q.v[i]), v1 = std::max<double>(v1, q.v[i]);
+                const std::uint32_t i = q_.triangles[3 * t + static_cast<std::size_t>(k)];
+                u0 = std::min(u0, q_.u[i]), u1 = std::max(u1, q_.u[i]);
+                v0 = std::min(v0, q_.v[i]), v1 = std::max(v1, q_.v[i]);
             }
             for (int cy = cell(v0); cy <= cell(v1); ++cy) {
                 for (int cx = cell(u0); cx <= cell(u1); ++cx) {
@@ -131,7 +131,7 @@ public:
             if (wa < kTol || wb < kTol || wc < kTol) {
                 continue;
             }
-            const double h = wa * q_.height(a) + wb * q_.height(b) + wc * q_.height(c);
+            const double h = wa * q_.h[a] + wb * q_.h[b] + wc * q_.h[c];
             const double e = std::abs(h - p.h);
             if (!found || e > error) {
                 error = e;
@@ -152,7 +152,7 @@ private:
         return std::clamp(
             static_cast<int>(w * cells_per_side_ / (kQuantizedMax + 1.0)), 0, cells_per_side_ - 1);
     }
-    const QuantizedMesh& q_;
+    SurfaceMesh q_;
     int cells_per_side_;
     std::vector<std::vector<std::uint32_t>> cells_;
 };
@@ -168,6 +168,18 @@ double QuantizedMesh::lat(std::size_t i) const {
 double QuantizedMesh::height(std::size_t i) const {
     const double lo = min_height, hi = max_height;
     return lo + (hi - lo) * (h[i] / double{kQuantizedMax});
+}
+
+SurfaceMesh to_surface(const QuantizedMesh& q) {
+    SurfaceMesh out;
+    out.bounds = q.bounds;
+    const std::size_t n = q.u.size();
+    out.u.resize(n), out.v.resize(n), out.h.resize(n);
+    for (std::size_t i = 0; i < n; ++i) {
+        out.u[i] = q.u[i], out.v[i] = q.v[i], out.h[i] = q.height(i);
+    }
+    out.triangles = q.triangles;
+    return out;
 }
 
 QuantizedMesh quantize_mesh(const TileMesh& mesh, const LonLatBox& bounds) {
@@ -288,7 +300,7 @@ probes_of(const LonLatBox& b, const TileRaster& raster, const std::vector<CheckP
     return out;
 }
 
-double worst_error(const QuantizedMesh& q, const std::vector<Probe>& probes, std::size_t* missed) {
+double worst_error(const SurfaceMesh& q, const std::vector<Probe>& probes, std::size_t* missed) {
     const TriangleBuckets buckets(q);
     double worst = 0;
     std::size_t outside = 0;
@@ -312,7 +324,14 @@ double quantized_error(const QuantizedMesh& q,
                        const TileRaster& raster,
                        const std::vector<CheckPoint>& points,
                        std::size_t* uncovered) {
-    return worst_error(q, probes_of(q.bounds, raster, points), uncovered);
+    return worst_error(to_surface(q), probes_of(q.bounds, raster, points), uncovered);
+}
+
+double surface_error(const SurfaceMesh& mesh,
+                     const TileRaster& raster,
+                     const std::vector<CheckPoint>& points,
+                     std::size_t* uncovered) {
+    return worst_error(mesh, probes_of(mesh.bounds, raster, points), uncovered);
 }
 
 QuantizedMesh quantize_within(TileMesh& mesh,
@@ -330,7 +349,7 @@ QuantizedMesh quantize_within(TileMesh& mesh,
         QuantizedMesh q = quantize_mesh(mesh, bounds);
         // Per triangle, its worst sample past `allowed` off the border lines (a vertex there
         // would be missing in the tile beside) and off the triangle's corners.
-        const TriangleBuckets buckets(q);
+        const TriangleBuckets buckets(to_surface(q));
         struct Worst {
             double error = 0;
             std::size_t probe = 0;
@@ -516,6 +535,29 @@ std::array<std::uint8_t, 2> oct_encode(const std::array<double, 3>& n) {
     return {snorm(x), snorm(y)};
 }
 
+std::array<double, 3> tile_horizon_point(const std::array<double, 3>& centre,
+                                         const std::vector<std::array<double, 3>>& points,
+                                         double min_height) {
+    std::array<double, 3> horizon{};
+    if (!horizon_occlusion_point(centre, points, min_height, horizon)) {
+        // Some vertex lies beyond 90 degrees of the centre's direction (a zoom 0 tile): no finite
+        // point is hidden exactly when the whole tile is. A point far out along the direction is
+        // hidden only from cameras in the ellipsoid's shadow cylinder behind it, from where such
+        // a tile shows at most its rim.
+        constexpr double kFar = 1e6;
+        double len = 0;
+        const double r[3] = {kWgs84A, kWgs84A, kWgs84B};
+        for (int k = 0; k < 3; ++k) {
+            horizon[k] = centre[k] / r[k];
+            len += horizon[k] * horizon[k];
+        }
+        for (double& c : horizon) {
+            c *= kFar / std::sqrt(len);
+        }
+    }
+    return horizon;
+}
+
 std::string encode_quantized_mesh(const QuantizedMesh& q, const QuantizedMeshExtras& extras) {
     const std::size_t n = q.u.size();
     TB_ASSERT(!q.triangles.empty());
@@ -554,23 +596,7 @@ std::string encode_quantized_mesh(const QuantizedMesh& q, const QuantizedMeshExt
         const double dx = p[0] - centre[0], dy = p[1] - centre[1], dz = p[2] - centre[2];
         radius = std::max(radius, std::sqrt(dx * dx + dy * dy + dz * dz));
     }
-    std::array<double, 3> horizon{};
-    if (!horizon_occlusion_point(centre, ecef, q.min_height, horizon)) {
-        // Some vertex lies beyond 90 degrees of the centre's direction (a zoom 0 tile): no finite
-        // point is hidden exactly when the whole tile is. A point far out along the direction is
-        // hidden only from cameras in the ellipsoid's shadow cylinder behind it, from where such
-        // a tile shows at most its rim.
-        constexpr double kFar = 1e6;
-        double len = 0;
-        const double r[3] = {kWgs84A, kWgs84A, kWgs84B};
-        for (int k = 0; k < 3; ++k) {
-            horizon[k] = centre[k] / r[k];
-            len += horizon[k] * horizon[k];
-        }
-        for (double& c : horizon) {
-            c *= kFar / std::sqrt(len);
-        }
-    }
+    const std::array<double, 3> horizon = tile_horizon_point(centre, ecef, q.min_height);
 
     std::string out;
     const bool wide = n > 65536;

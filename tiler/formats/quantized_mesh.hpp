@@ -46,6 +46,16 @@ struct QuantizedMesh {
 };
 QuantizedMesh quantize_mesh(const TileMesh& mesh, const LonLatBox& bounds);
 
+// A surface over the tile's rectangle in the same u/v units (0..32767 west to east, south to
+// north) at real positions: a quantized mesh as decoded, or a tile whose vertices moved off the
+// 15-bit lattice (3D Tiles terrain's 16-bit ECEF positions, decoded back to lon/lat/height).
+struct SurfaceMesh {
+    LonLatBox bounds;
+    std::vector<double> u, v, h; // h: ellipsoidal metres
+    std::vector<std::uint32_t> triangles;
+};
+SurfaceMesh to_surface(const QuantizedMesh& q);
+
 // The largest |drawn height - sample| over the valid samples of raster.grid and the check
 // points, the drawn surface being the quantized triangles interpolated linearly in lon/lat (the
 // chord sag of straight ECEF triangles comes on top). `uncovered`, when given, counts samples no
@@ -54,6 +64,12 @@ double quantized_error(const QuantizedMesh& q,
                        const TileRaster& raster,
                        const std::vector<CheckPoint>& points,
                        std::size_t* uncovered = nullptr);
+
+// quantized_error of any surface mesh.
+double surface_error(const SurfaceMesh& mesh,
+                     const TileRaster& raster,
+                     const std::vector<CheckPoint>& points,
+                     std::size_t* uncovered = nullptr);
 
 // quantize_mesh, refined until the quantized surface is within `allowed` of every valid sample
 // of raster.grid and every check point: each round splits every triangle whose worst sample is
@@ -94,6 +110,12 @@ bool horizon_occlusion_point(const std::array<double, 3>& direction,
                              const std::vector<std::array<double, 3>>& points,
                              double min_height,
                              std::array<double, 3>& out);
+
+// horizon_occlusion_point along `centre`, or where none exists (a tile reaching beyond 90
+// degrees of its centre's direction, at zoom 0) a point far out along it.
+std::array<double, 3> tile_horizon_point(const std::array<double, 3>& centre,
+                                         const std::vector<std::array<double, 3>>& points,
+                                         double min_height);
 
 // Two bytes: a unit vector oct-encoded as CesiumJS's AttributeCompression.octEncode (8 bits
 // per component).

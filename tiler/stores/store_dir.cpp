@@ -332,8 +332,18 @@ private:
         if (key.eps_level >= 0) {
             p.dirs.push_back("eps" + std::to_string(key.eps_level));
         }
-        p.dirs.push_back(std::to_string(key.id.z));
-        p.dirs.push_back(std::to_string(key.id.x));
+        if (key.format == Format::Terrain3d) {
+            // Beside terrain/tileset.json, as its content URI template says:
+            // terrain/{root}/{level}/{x within the root}/{y}.glb.
+            const std::int64_t side = std::int64_t{1} << key.id.z;
+            p.dirs.push_back("terrain");
+            p.dirs.push_back(std::to_string(key.id.x / side));
+            p.dirs.push_back(std::to_string(key.id.z));
+            p.dirs.push_back(std::to_string(key.id.x % side));
+        } else {
+            p.dirs.push_back(std::to_string(key.id.z));
+            p.dirs.push_back(std::to_string(key.id.x));
+        }
         p.name = std::to_string(key.id.y) + "." + extension(key.format);
         p.shown = shown(p);
         return p;
