@@ -6,6 +6,9 @@
 // 3D Tiles view and back.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
+import fsp from 'node:fs/promises';
+import os from 'node:os';
+import path from 'node:path';
 import {
   DEM, missingPrerequisite, startTerrabound, pageOrigin, launchBrowser, openPage, saveScreenshot,
   differingShare, lumaSpread, describeRecord, pickReliefTile,
@@ -238,4 +241,48 @@ test('the viewer page at / opens on lit globe terrain at the finest zoom, with a
     assert.deepEqual(badResponses, [], 'HTTP errors');
     assertClean(record, 'viewer');
     await page.close();
+  });
+
+// A layer that is not served as globe terrain (mercator): the page falls back to the 3D Tiles
+// model and says why.
+test('the viewer shows a mercator layer as the 3D Tiles model, with a note why',
+  { skip: skip || false, timeout: 180000 }, async (t) => {
+    const dir = await fsp.mkdtemp(path.join(os.tmpdir(), 'tb-viewer-'));
+    const config = path.join(dir, 'mercator.json');
+    await fsp.writeFile(config, JSON.stringify({
+      layers: [{ name: 'merc', sources: [path.resolve(DEM)], scheme: 'mercator', formats: ['glb'], store: null }],
+    }));
+    const mercator = await startTerrabound([config]);
+    const mercatorPages = await pageOrigin(mercator.url);
+    try {
+      const { page, record } = await openPage(browser.context);
+      const requests = [];
+      page.on('request', (req) => requests.push(new URL(req.url()).pathname));
+      await page.goto(`${mercatorPages.origin}/?test=1&${mercatorPages.query}`, { waitUntil: 'load' });
+      await page.evaluate(() => window.tb.ready);
+      await page.evaluate(() => window.tb.waitLoaded(90000));
+      const state = await page.evaluate(() => ({
+        view: window.tb.view, screen: window.tb.screen,
+        picker: document.getElementById('view').value,
+        terrainOption: document.querySelector('#view option[value="terrain"]').disabled,
+        note: document.getElementById('note').textContent,
+        noteShown: document.getElementById('note').getBoundingClientRect().height > 0,
+      }));
+      t.diagnostic(`mercator: ${JSON.stringify(state)}`);
+      assert.equal(state.view, 'tileset');
+      assert.equal(state.picker, 'tileset');
+      assert.ok(state.terrainOption, 'the globe terrain view is disabled');
+      assert.match(state.note, /mercator/);
+      assert.ok(state.noteShown, 'the note is visible');
+      assert.ok(requests.some((p) => p.endsWith('.glb')), '.glb tiles were fetched');
+      assert.ok(!requests.some((p) => p.endsWith('.terrain') || p.endsWith('layer.json')), 'no terrain was asked for');
+      assert.ok(state.screen.tiles > 0, 'the model is on screen');
+      await saveScreenshot(page, 'viewer-mercator.png');
+      assertClean(record, 'viewer mercator');
+      await page.close();
+    } finally {
+      await mercatorPages.stop();
+      await mercator.stop();
+      await fsp.rm(dir, { recursive: true, force: true });
+    }
   });
