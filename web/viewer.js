@@ -445,7 +445,17 @@
       if (moveCamera) flyToLayer(layer, duration);
       return tileset;
     }
-    const provider = await loadTerrain(layer, view);
+    let provider;
+    try {
+      provider = await loadTerrain(layer, view);
+    } catch (e) {
+      if (mine !== generation) return null;
+      console.error(e);
+      const shown = await show(name, 'tileset', moveCamera);
+      noteEl.textContent = `the globe terrain of ${name} did not load (${e.message}), so it is ` +
+        'shown as the 3D Tiles model';
+      return shown;
+    }
     if (mine !== generation) return null;
     scene.terrainProvider = provider;
     tb.terrainProvider = provider;
