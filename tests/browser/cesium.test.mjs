@@ -120,7 +120,9 @@ test('stock CesiumJS draws the layer at the overview distance',
 // layer.json, vertex normals and water mask asked for), lit, over Natural Earth II from the
 // cesium package; a wireframe switch; a switch to the 3D Tiles model and back.
 test('the viewer page at / opens on lit globe terrain at the finest zoom, with a wireframe switch and a 3D Tiles view',
-  { skip: skip || false, timeout: 240000 }, async (t) => {
+  { skip: skip || false, timeout: 300000 }, async (t) => {
+    const t0 = Date.now();
+    const since = () => `${((Date.now() - t0) / 1000).toFixed(1)} s`;
     const { page, record } = await openPage(browser.context);
     const requests = [];  // [url, accept header] of every request of the page
     const badResponses = [];
@@ -156,7 +158,7 @@ test('the viewer page at / opens on lit globe terrain at the finest zoom, with a
         readout: ['ro-levels', 'ro-tiles', 'ro-eps', 'ro-ge'].map((id) => document.getElementById(id).textContent),
       };
     });
-    t.diagnostic(`globe: camera ${globe.altitude.toFixed(0)} m above the ellipsoid, maximumScreenSpaceError ${globe.sse}, on screen ${JSON.stringify(globe.screen)}, readout ${JSON.stringify(globe.readout)}`);
+    t.diagnostic(`${since()}: globe: camera ${globe.altitude.toFixed(0)} m above the ellipsoid, maximumScreenSpaceError ${globe.sse}, on screen ${JSON.stringify(globe.screen)}, readout ${JSON.stringify(globe.readout)}`);
     assert.equal(globe.view, 'terrain', 'the default view is globe terrain');
     assert.equal(globe.viewPicker, 'terrain', 'the view picker shows globe terrain');
     assert.equal(globe.note, '', 'no fallback note on a layer serving terrain');
@@ -197,7 +199,7 @@ test('the viewer page at / opens on lit globe terrain at the finest zoom, with a
     await page.waitForTimeout(500);
     const wire = await saveScreenshot(page, 'viewer-wireframe.png');
     const wireShare = await differingShare(page, wire.png, { reference: shot.png, tolerance: 12 });
-    t.diagnostic(`wireframe changes ${(wireShare * 100).toFixed(1)} % of the globe view (${wire.file})`);
+    t.diagnostic(`${since()}: wireframe changes ${(wireShare * 100).toFixed(1)} % of the globe view (${wire.file})`);
     assert.ok(wireShare > 0.05, `the wireframe changes only ${(wireShare * 100).toFixed(1)} % of the screen`);
     await page.uncheck('#wireframe');
     await page.waitForTimeout(500);
@@ -213,7 +215,7 @@ test('the viewer page at / opens on lit globe terrain at the finest zoom, with a
       screen: window.tb.screen, failed: window.tb.failed,
       ellipsoid: window.tb.viewer.scene.terrainProvider instanceof Cesium.EllipsoidTerrainProvider,
     }));
-    t.diagnostic(`3D Tiles view: on screen ${JSON.stringify(model.screen)}, ${count(/\.glb$/, before)} .glb requests`);
+    t.diagnostic(`${since()}: 3D Tiles view: on screen ${JSON.stringify(model.screen)}, ${count(/\.glb$/, before)} .glb requests`);
     assert.ok(count(/\.glb$/, before) > 0, 'the 3D Tiles view fetched .glb tiles');
     assert.ok(model.ellipsoid, 'the 3D Tiles view takes the terrain off the globe');
     assert.deepEqual(model.failed, [], 'tileFailed events');
@@ -235,6 +237,7 @@ test('the viewer page at / opens on lit globe terrain at the finest zoom, with a
     assert.ok(again.isCesiumTerrain && again.tileset === null, 'the globe terrain is back, the model gone');
     assert.ok(count(/\.terrain$/, back) > 0, 'terrain tiles were fetched again');
     assert.ok(again.screen.levels.includes(globe.layer.max_zoom), 'the finest zoom is on screen again');
+    t.diagnostic(`${since()}: back on the globe: on screen ${JSON.stringify(again.screen)}`);
     const backShare = await differingShare(page, await page.screenshot(), { reference: shot.png, tolerance: 12 });
     assert.ok(backShare < 0.05, `back on the globe, ${(backShare * 100).toFixed(1)} % differs from the first globe view`);
 
