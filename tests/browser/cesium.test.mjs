@@ -289,3 +289,23 @@ test('the viewer shows a mercator layer as the 3D Tiles model, with a note why',
       await fsp.rm(dir, { recursive: true, force: true });
     }
   });
+
+// The 3D Tiles terrain view is offered once /layers lists terrain_tileset for the layer (the
+// field is faked here, on the page's copy of /layers; the view is not opened).
+test('the view picker offers the 3D Tiles terrain when /layers lists terrain_tileset',
+  { skip: skip || false, timeout: 180000 }, async () => {
+    const { page, record } = await openPage(browser.context);
+    await page.route((u) => u.pathname === '/layers', async (route) => {
+      const res = await route.fetch();
+      const doc = await res.json();
+      for (const layer of doc.layers) layer.terrain_tileset = `/${layer.name}/terrain/tileset.json`;
+      await route.fulfill({ response: res, json: doc });
+    });
+    await page.goto(`${pages.origin}/?test=1&view=tileset&${pages.query}`, { waitUntil: 'load' });
+    await page.evaluate(() => window.tb.ready);
+    const option = await page.$eval('#view option[value="terrain-tileset"]', (o) => ({ hidden: o.hidden, disabled: o.disabled }));
+    assert.deepEqual(option, { hidden: false, disabled: false });
+    await page.evaluate(() => window.tb.waitLoaded(90000));
+    assertClean(record, 'viewer with terrain_tileset');
+    await page.close();
+  });
