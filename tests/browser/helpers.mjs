@@ -273,6 +273,32 @@ export async function differingShare(page, png, { reference = null, background =
     bg: background, tol: tolerance });
 }
 
+// The standard deviation of the luma (0..255) of a PNG screenshot, decoded by the browser: near
+// 0 for a uniform frame, larger the more the picture varies (relief, imagery, edges).
+export async function lumaSpread(page, png) {
+  return page.evaluate(async (b64) => {
+    const img = new Image();
+    img.src = `data:image/png;base64,${b64}`;
+    await img.decode();
+    const c = document.createElement('canvas');
+    c.width = img.width;
+    c.height = img.height;
+    const g = c.getContext('2d');
+    g.drawImage(img, 0, 0);
+    const p = g.getImageData(0, 0, img.width, img.height).data;
+    let sum = 0;
+    let sum2 = 0;
+    const n = p.length / 4;
+    for (let i = 0; i < n; ++i) {
+      const y = 0.2126 * p[i * 4] + 0.7152 * p[i * 4 + 1] + 0.0722 * p[i * 4 + 2];
+      sum += y;
+      sum2 += y * y;
+    }
+    const mean = sum / n;
+    return Math.sqrt(Math.max(sum2 / n - mean * mean, 0));
+  }, Buffer.from(png).toString('base64'));
+}
+
 export function describeRecord(record) {
   return JSON.stringify({
     consoleErrors: record.consoleErrors, pageErrors: record.pageErrors,
