@@ -178,7 +178,7 @@ public:
 
     // What the terrain tileset publishes. Heights: every tile's vertices lie within the
     // layer's range or on the geoid (filler, and the corners covering a rectangle beyond the
-    // DEM), whose undulation stays within -107..86 m. Level errors: a tile at a meshed zoom is
+    // DEM), whose undulation stays within kGeoidLowest..kGeoidHighest. Level errors: a tile at a meshed zoom is
     // held to its zoom's bound (data_terrain measures what its glb draws); a filler tile over
     // the data is as far from it as the DEM's heights are from the geoid.
     TerrainTilesetSpec terrain_tileset_spec() const {
@@ -188,8 +188,8 @@ public:
         spec.max_height = std::max(max_height_, kGeoidHighest);
         spec.root_error = relief() * std::exp2(std::max(min_zoom_ - 1, 0));
         for (int z = min_zoom_; z <= max_zoom_; ++z) {
-            spec.root_error = std::max(spec.root_error,
-                                       budget_at(z, eps_for_zoom(z)).drawn_bound * std::exp2(z));
+            spec.root_error =
+                std::max(spec.root_error, budget_at(z, eps_for_zoom(z)).drawn_bound * std::exp2(z));
         }
         const double lo = spec.min_height, hi = spec.max_height;
         spec.bounds = [lo, hi](const TileId& id) {
@@ -435,6 +435,8 @@ private:
         tile.extras.metadata = terrain_metadata(spec, id, 0, true);
         tile.mesh = quantize_mesh(filler, bounds);
         tile.glb_error = filler_error(id);
+        // Float positions: a 16-bit step of a coarse filler tile's box is tens of metres.
+        tile.exact_positions = true;
         return tile;
     }
 

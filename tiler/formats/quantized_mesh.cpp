@@ -85,8 +85,10 @@ public:
     // About two triangles per cell.
     explicit TriangleBuckets(SurfaceMesh mesh)
         : q_(std::move(mesh)),
-          cells_per_side_(std::clamp(
-              static_cast<int>(std::sqrt(static_cast<double>(q_.triangles.size()) / 6)), 16, 1024)) {
+          cells_per_side_(
+              std::clamp(static_cast<int>(std::sqrt(static_cast<double>(q_.triangles.size()) / 6)),
+                         16,
+                         1024)) {
         cells_.resize(static_cast<std::size_t>(cells_per_side_) * cells_per_side_);
         for (std::size_t t = 0; t * 3 < q_.triangles.size(); ++t) {
             double u0 = 1e9, u1 = -1e9, v0 = 1e9, v1 = -1e9;

@@ -3,8 +3,8 @@
 #include "tiler/formats/terrain_tiles.hpp"
 
 #include "core/error.hpp"
-#include "tiler/geodesy.hpp"
 #include "tiler/formats/encode.hpp"
+#include "tiler/geodesy.hpp"
 #include "tiler/json_number.hpp"
 
 #include <meshoptimizer.h>
@@ -103,7 +103,8 @@ struct QuantizedPositions {
         if (!exact) {
             return decoded_enu(box, q[i]);
         }
-        return {box.min[0] + double{f[i][0]}, box.min[1] + double{f[i][1]},
+        return {box.min[0] + double{f[i][0]},
+                box.min[1] + double{f[i][1]},
                 box.min[2] + double{f[i][2]}};
     }
 };
@@ -258,27 +259,28 @@ std::string terrain_tileset_json(const TerrainTilesetSpec& spec) {
         return std::string("\"") + name + "\":{\"type\":\"" + type +
                "\",\"componentType\":\"FLOAT64\",\"semantic\":\"" + semantic + "\"}";
     };
-    std::string out = "{\"asset\":{\"version\":\"1.1\",\"generator\":\"Terrabound\","
-                      "\"extras\":{\"layer\":\"" +
-                      t.name +
-                      "\",\"eps_meaning\":\"a level's geometricError bounds, in metres, the "
-                      "vertical distance from each drawn tile to every valid source pixel centre "
-                      "under it (levels below " +
-                      std::to_string(t.min_zoom) +
-                      " are flat filler at sea level, as far from the DEM as its relief); a tile "
-                      "that could not be held to its level's bound publishes its own in its "
-                      "glb's asset.extras.geometricError\"}},\"schema\":{\"id\":\"terrabound_terrain\","
-                      "\"classes\":{\"tile\":{\"properties\":{" +
-                      property("minimumHeight", "SCALAR", "TILE_MINIMUM_HEIGHT") + "," +
-                      property("maximumHeight", "SCALAR", "TILE_MAXIMUM_HEIGHT") +
-                      ",\"boundingSphere\":{\"type\":\"SCALAR\",\"componentType\":\"FLOAT64\","
-                      "\"array\":true,\"count\":4,\"semantic\":\"TILE_BOUNDING_SPHERE\"}," +
-                      property("horizonOcclusionPoint", "VEC3", "TILE_HORIZON_OCCLUSION_POINT") +
-                      "}}}},\"geometricError\":" + num(2 * spec.root_error) +
-                      ",\"root\":{\"boundingVolume\":" + region(-kPi, kPi) +
-                      ",\"geometricError\":" + num(2 * spec.root_error) +
-                      ",\"refine\":\"REPLACE\",\"children\":[" + implicit_root(0) + "," +
-                      implicit_root(1) + "]}}\n";
+    std::string out =
+        "{\"asset\":{\"version\":\"1.1\",\"generator\":\"Terrabound\","
+        "\"extras\":{\"layer\":\"" +
+        t.name +
+        "\",\"eps_meaning\":\"a level's geometricError bounds, in metres, the "
+        "vertical distance from each drawn tile to every valid source pixel centre "
+        "under it (levels below " +
+        std::to_string(t.min_zoom) +
+        " are flat filler at sea level, as far from the DEM as its relief); a tile "
+        "that could not be held to its level's bound publishes its own in its "
+        "glb's asset.extras.geometricError\"}},\"schema\":{\"id\":\"terrabound_terrain\","
+        "\"classes\":{\"tile\":{\"properties\":{" +
+        property("minimumHeight", "SCALAR", "TILE_MINIMUM_HEIGHT") + "," +
+        property("maximumHeight", "SCALAR", "TILE_MAXIMUM_HEIGHT") +
+        ",\"boundingSphere\":{\"type\":\"SCALAR\",\"componentType\":\"FLOAT64\","
+        "\"array\":true,\"count\":4,\"semantic\":\"TILE_BOUNDING_SPHERE\"}," +
+        property("horizonOcclusionPoint", "VEC3", "TILE_HORIZON_OCCLUSION_POINT") +
+        "}}}},\"geometricError\":" + num(2 * spec.root_error) +
+        ",\"root\":{\"boundingVolume\":" + region(-kPi, kPi) +
+        ",\"geometricError\":" + num(2 * spec.root_error) +
+        ",\"refine\":\"REPLACE\",\"children\":[" + implicit_root(0) + "," + implicit_root(1) +
+        "]}}\n";
     return out;
 }
 
@@ -380,31 +382,30 @@ bool terrain_subtree(const TerrainTilesetSpec& spec,
             column([](const TerrainTileBounds& r, int) { return r.min_height; }, 1);
         const std::size_t hi =
             column([](const TerrainTileBounds& r, int) { return r.max_height; }, 1);
-        const std::size_t sphere = column(
-            [](const TerrainTileBounds& r, int k) {
-                return r.bounding_sphere[static_cast<std::size_t>(k)];
-            },
-            4);
-        const std::size_t horizon = column(
-            [](const TerrainTileBounds& r, int k) {
-                return r.horizon_occlusion[static_cast<std::size_t>(k)];
-            },
-            3);
+        const std::size_t sphere =
+            column([](const TerrainTileBounds& r,
+                      int k) { return r.bounding_sphere[static_cast<std::size_t>(k)]; },
+                   4);
+        const std::size_t horizon =
+            column([](const TerrainTileBounds& r,
+                      int k) { return r.horizon_occlusion[static_cast<std::size_t>(k)]; },
+                   3);
         const auto values = [](std::size_t view) {
             return "{\"values\":" + std::to_string(view) + "}";
         };
-        table = ",\"propertyTables\":[{\"class\":\"tile\",\"count\":" +
-                std::to_string(rows.size()) + ",\"properties\":{\"minimumHeight\":" + values(lo) +
-                ",\"maximumHeight\":" + values(hi) + ",\"boundingSphere\":" + values(sphere) +
-                ",\"horizonOcclusionPoint\":" + values(horizon) + "}}],\"tileMetadata\":0";
+        table =
+            ",\"propertyTables\":[{\"class\":\"tile\",\"count\":" + std::to_string(rows.size()) +
+            ",\"properties\":{\"minimumHeight\":" + values(lo) +
+            ",\"maximumHeight\":" + values(hi) + ",\"boundingSphere\":" + values(sphere) +
+            ",\"horizonOcclusionPoint\":" + values(horizon) + "}}],\"tileMetadata\":0";
     }
     pad_to(bin, 8, '\0');
     json += "\"buffers\":[{\"byteLength\":" + std::to_string(bin.size()) + "}],\"bufferViews\":[";
     for (std::size_t i = 0; i < views.size(); ++i) {
         json += (i ? "," : "") + views[i];
     }
-    json += "],\"tileAvailability\":" + availability + ",\"contentAvailability\":[" +
-            availability + "],\"childSubtreeAvailability\":" + child_json + table + "}";
+    json += "],\"tileAvailability\":" + availability + ",\"contentAvailability\":[" + availability +
+            "],\"childSubtreeAvailability\":" + child_json + table + "}";
     pad_to(json, 8, ' ');
 
     out.clear();
@@ -554,8 +555,9 @@ std::string encode_terrain_glb(const TerrainTile& tile) {
                                     const char* target) {
         pad_to(bin, 4, '\0');
         fallback = (fallback + 7) / 8 * 8;
-        views += std::string(view_count ? "," : "") + "{\"buffer\":1,\"byteOffset\":" +
-                 std::to_string(fallback) + ",\"byteLength\":" + std::to_string(length) +
+        views += std::string(view_count ? "," : "") +
+                 "{\"buffer\":1,\"byteOffset\":" + std::to_string(fallback) +
+                 ",\"byteLength\":" + std::to_string(length) +
                  (std::strcmp(mode, "ATTRIBUTES") == 0 ? ",\"byteStride\":" + std::to_string(stride)
                                                        : std::string()) +
                  target + ",\"extensions\":{\"EXT_meshopt_compression\":{\"buffer\":0," +
@@ -587,9 +589,9 @@ std::string encode_terrain_glb(const TerrainTile& tile) {
     };
     std::size_t position_view = 0;
     if (pos.exact) {
-        views += std::string(view_count ? "," : "") + "{\"buffer\":0,\"byteOffset\":" +
-                 std::to_string(bin.size()) + ",\"byteLength\":" +
-                 std::to_string(4 * exact.size()) + ",\"target\":34962}";
+        views += std::string(view_count ? "," : "") +
+                 "{\"buffer\":0,\"byteOffset\":" + std::to_string(bin.size()) +
+                 ",\"byteLength\":" + std::to_string(4 * exact.size()) + ",\"target\":34962}";
         bin.append(reinterpret_cast<const char*>(exact.data()), 4 * exact.size());
         position_view = view_count++;
     } else {
@@ -601,8 +603,8 @@ std::string encode_terrain_glb(const TerrainTile& tile) {
         if (vsize == 0) {
             throw Error("meshoptimizer could not encode the positions of a terrain tile");
         }
-        position_view = add_compressed(
-            std::move(vdata), vsize, 8 * n, 8, n, "ATTRIBUTES", ",\"target\":34962");
+        position_view =
+            add_compressed(std::move(vdata), vsize, 8 * n, 8, n, "ATTRIBUTES", ",\"target\":34962");
     }
     std::size_t normal_view = 0;
     if (!normals.empty()) {
@@ -636,21 +638,20 @@ std::string encode_terrain_glb(const TerrainTile& tile) {
         ",\"max\":" + vec(qmax) + "}");
     std::string attributes = "\"POSITION\":" + std::to_string(position_accessor);
     if (!normals.empty()) {
-        attributes += ",\"NORMAL\":" + std::to_string(add_accessor(
-                                           "{\"bufferView\":" + std::to_string(normal_view) +
-                                           ",\"componentType\":5126,\"count\":" +
-                                           std::to_string(n) + ",\"type\":\"VEC3\"}"));
+        attributes +=
+            ",\"NORMAL\":" +
+            std::to_string(add_accessor("{\"bufferView\":" + std::to_string(normal_view) +
+                                        ",\"componentType\":5126,\"count\":" + std::to_string(n) +
+                                        ",\"type\":\"VEC3\"}"));
     }
-    const std::size_t index_accessor =
-        add_accessor("{\"bufferView\":" + std::to_string(index_view) + ",\"componentType\":" +
-                     index_type + ",\"count\":" + std::to_string(indices.size()) +
-                     ",\"type\":\"SCALAR\"}");
+    const std::size_t index_accessor = add_accessor(
+        "{\"bufferView\":" + std::to_string(index_view) + ",\"componentType\":" + index_type +
+        ",\"count\":" + std::to_string(indices.size()) + ",\"type\":\"SCALAR\"}");
     std::array<std::size_t, 4> edge_accessors{};
     for (std::size_t s = 0; s < 4; ++s) {
         edge_accessors[s] = add_accessor("{\"bufferView\":" + std::to_string(edge_views[s]) +
-                                         ",\"componentType\":" + index_type +
-                                         ",\"count\":" + std::to_string(edges[s].size()) +
-                                         ",\"type\":\"SCALAR\"}");
+                                         ",\"componentType\":" + index_type + ",\"count\":" +
+                                         std::to_string(edges[s].size()) + ",\"type\":\"SCALAR\"}");
     }
 
     // nodes[0].matrix takes the unit cube to glTF's y-up axes: ECEF = Y_UP_TO_Z_UP * matrix * p.
@@ -682,7 +683,8 @@ std::string encode_terrain_glb(const TerrainTile& tile) {
         "\"extensionsUsed\":[\"EXT_meshopt_compression\"," +
         std::string(pos.exact ? "" : "\"KHR_mesh_quantization\",") +
         "\"CESIUM_tile_edges\"],\"extensionsRequired\":[\"EXT_meshopt_compression\"" +
-        (pos.exact ? "" : ",\"KHR_mesh_quantization\"") + "],\"scene\":0,\"scenes\":[{\"nodes\":[0]}],"
+        (pos.exact ? "" : ",\"KHR_mesh_quantization\"") +
+        "],\"scene\":0,\"scenes\":[{\"nodes\":[0]}],"
         "\"nodes\":[{\"mesh\":0,\"matrix\":" +
         matrix_json + "}],\"meshes\":[{\"primitives\":[{\"attributes\":{" + attributes +
         "},\"indices\":" + std::to_string(index_accessor) +
@@ -693,8 +695,9 @@ std::string encode_terrain_glb(const TerrainTile& tile) {
         "}}}]}],\"materials\":[{\"name\":\"terrain\",\"pbrMetallicRoughness\":{"
         "\"baseColorFactor\":[0.62,0.58,0.5,1],\"metallicFactor\":0,\"roughnessFactor\":1}}],"
         "\"accessors\":[" +
-        accessors + "],\"bufferViews\":[" + views + "],\"buffers\":[{\"byteLength\":" +
-        std::to_string(bin.size()) + "},{\"byteLength\":" + std::to_string(fallback) +
+        accessors + "],\"bufferViews\":[" + views +
+        "],\"buffers\":[{\"byteLength\":" + std::to_string(bin.size()) +
+        "},{\"byteLength\":" + std::to_string(fallback) +
         ",\"extensions\":{\"EXT_meshopt_compression\":{\"fallback\":true}}}]}";
     return glb_container(std::move(json), bin);
 }

@@ -37,17 +37,17 @@ struct TerrainTile {
     bool exact_positions = false;
 };
 
-// The geoid's undulation (EGM96) stays within these heights, metres.
-inline constexpr double kGeoidLowest = -107.0;
-inline constexpr double kGeoidHighest = 86.0;
+// The geoid's undulation (EGM96: -106.99 .. 85.39 m) stays within these heights, metres.
+inline constexpr double kGeoidLowest = -110.0;
+inline constexpr double kGeoidHighest = 90.0;
 
 // Levels per subtree file.
 inline constexpr int kTerrainSubtreeLevels = 4;
 
 // The tile metadata a subtree holds for one tile.
 struct TerrainTileBounds {
-    double min_height = 0, max_height = 0;    // ellipsoidal metres, containing every vertex
-    std::array<double, 4> bounding_sphere{};  // ECEF centre, radius
+    double min_height = 0, max_height = 0;     // ellipsoidal metres, containing every vertex
+    std::array<double, 4> bounding_sphere{};   // ECEF centre, radius
     std::array<double, 3> horizon_occlusion{}; // ellipsoid-scaled, as quantized-mesh's
 };
 
@@ -57,8 +57,8 @@ TerrainTileBounds terrain_tile_bounds(const LonLatBox& box, double min_height, d
 
 // What the terrain tileset and its subtrees say about a layer.
 struct TerrainTilesetSpec {
-    TerrainSpec terrain;      // availability: terrain_available(terrain, z)
-    double min_height = 0;    // over every tile, ellipsoidal metres
+    TerrainSpec terrain;   // availability: terrain_available(terrain, z)
+    double min_height = 0; // over every tile, ellipsoidal metres
     double max_height = 0;
     // The metadata of an available tile (geodetic id).
     std::function<TerrainTileBounds(const TileId&)> bounds;
