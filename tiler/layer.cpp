@@ -446,9 +446,8 @@ private:
         // tile) across the slope: it is measured at every sample, and where it takes the tile
         // past its bound the worst samples become vertices (quantize_within). The border lines
         // keep the vertices the zoom's eps gave them, so neighbouring tiles still share them.
-        // A share of the bound is kept for the 3D Tiles glb's 16-bit positions: the surface it
-        // draws is measured at every sample too, and if it does not fit, the share grows and the
-        // mesh is refined again.
+        // The 3D Tiles glb's surface is measured at every sample too: where its 16-bit positions
+        // would take it past the bound, it carries float32 positions instead.
         const double eps = eps_for_zoom(id.z);
         const double target = budget_at(id.z, eps).drawn_bound;
         MeshedTile t = mesh_at(id, eps, false);
@@ -457,23 +456,12 @@ private:
         }
         cover_rectangle(t.mesh, bounds);
         TerrainTile tile;
-        double error = 0, glb_error = 0;
         std::size_t uncovered = 0;
-        for (double share : {1.0 / 16, 1.0 / 8, 1.0 / 4}) {
-            uncovered = 0;
-            tile.mesh = quantize_within(t.mesh,
-                                        bounds,
-                                        t.raster,
-                                        t.source_pixels,
-                                        target - t.budget.sag - share * target,
-                                        error,
-                                        &uncovered);
-            glb_error =
-                surface_error(terrain_glb_surface(tile.mesh, false), t.raster, t.source_pixels);
-            if (std::max(error, glb_error) + t.budget.sag <= target) {
-                break;
-            }
-        }
+        double error = 0;
+        tile.mesh = quantize_within(
+            t.mesh, bounds, t.raster, t.source_pixels, target - t.budget.sag, error, &uncovered);
+        double glb_error =
+            surface_error(terrain_glb_surface(tile.mesh, false), t.raster, t.source_pixels);
         if (glb_error + t.budget.sag > target) {
             tile.exact_positions = true;
             glb_error =
