@@ -58,7 +58,8 @@ std::vector<tiler::Format> parse_formats(const std::string& text) {
         if (!f) {
             throw InputError(
                 "build: --formats: unknown format '" + name +
-                "'; expected a comma-separated list of glb, drc, terrarium, mapbox, terrain");
+                "'; expected a comma-separated list of glb, drc, terrarium, mapbox, terrain, "
+                "terrain3d");
         }
         formats.push_back(*f);
     }
@@ -213,8 +214,10 @@ const Command& build_command() {
              {"bbox", "W,S,E,N", "only tiles meeting this box, degrees (no tileset is written)"},
              {"formats",
               "LIST",
-              "comma-separated: glb, drc, terrarium, mapbox (default glb); terrarium and "
-              "mapbox are PNG DEM tiles (EPSG:3857 XYZ) under OUT/{layer}/dem/"},
+              "comma-separated: glb, drc, terrarium, mapbox, terrain, terrain3d (default glb); "
+              "terrarium and mapbox are PNG DEM tiles (EPSG:3857 XYZ) under OUT/{layer}/dem/; "
+              "terrain is quantized-mesh with OUT/{layer}/layer.json, terrain3d 3D Tiles "
+              "terrain with OUT/{layer}/terrain/tileset.json (both geodetic, from zoom 0)"},
              {"dem-size", "P", "DEM tiles are P x P pixels, 256 or 512 (default 512)"},
              {"dem-heights", "H", "DEM tile heights: sea_level (default) or ellipsoid"},
              {"nodata", "V", "raw sample value to treat as nodata, replacing the file's own"},

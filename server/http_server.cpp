@@ -759,9 +759,8 @@ struct HttpServer::Impl {
                 out << ",\"layer_json\":\"/" << o.name << "/layer.json\"";
             }
             if (o.scheme == tiler::Scheme::Geodetic &&
-                std::find(served.formats.begin(),
-                          served.formats.end(),
-                          tiler::Format::Terrain3d) != served.formats.end()) {
+                std::find(served.formats.begin(), served.formats.end(), tiler::Format::Terrain3d) !=
+                    served.formats.end()) {
                 out << ",\"terrain_tileset\":\"/" << o.name << "/terrain/tileset.json\"";
             }
             out << dem_json(served) << "}";

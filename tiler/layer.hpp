@@ -116,7 +116,8 @@ public:
     // the budget's drawn bound, or for Measured layers the larger measured bound of that tile
     // (meshed here once if it was not made yet). Throws like make_tile.
     virtual double tile_error(const TileId& id) const = 0;
-    // Tiles made so far whose measured error exceeded their zoom's eps (Measured layers).
+    // Tiles made so far whose measured error exceeded their zoom's eps: Measured layers' tiles,
+    // and globe terrain tiles whose quantization left them above it (once per format made).
     virtual std::size_t tiles_over_eps() const = 0;
 
     // Ellipsoidal height range every tile's mesh stays within (padded by 1 m), metres.

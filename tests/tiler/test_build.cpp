@@ -1,6 +1,7 @@
 // terrabound build, end to end: the real binary (TB_BINARY) on a generated GeoTIFF and on a
 // real DEM, into both stores; kill and resume, shards, thread counts, bad input.
 #include "core/error.hpp"
+#include "terrain3d_reader.hpp"
 #include "tiler/build/build.hpp"
 #include "tiler/dem_tiles.hpp"
 #include "tiler/formats/draco_decode.hpp"
@@ -859,4 +860,107 @@ TEST_CASE("build --formats glb,terrain writes layer.json and every terrain tile 
     REQUIRE(part.code == 0);
     CHECK(part.err.find("layer.json not written") != std::string::npos);
     CHECK_FALSE(fs::exists(dir.path / "part/terrain/layer.json"));
+}
+
+TEST_CASE("build --formats terrain3d writes terrain/tileset.json, every subtree it reaches and "
+          "every glb they list, where its URI templates point, the layer's own bytes, into both "
+          "stores") {
+    BuildDir dir;
+    const auto dem = write_dem(dir / "dem.tif");
+    const Run a = run(args(dem, dir / "out", {"--formats", "terrain3d"}), dir);
+    INFO(a.err);
+    REQUIRE(a.code == 0);
+    const fs::path root = dir.path / "out/terrain/terrain";
+    REQUIRE(fs::exists(root / "tileset.json"));
+
+    LayerOptions o; // as kSmall
+    o.sources = {dem};
+    o.tile_size = 32;
+    o.min_zoom = 7;
+    o.max_zoom = 9;
+    const auto layer = Layer::open(o);
+    std::string tileset;
+    REQUIRE(layer->document("terrain/tileset.json", tileset));
+    CHECK(slurp(root / "tileset.json") == tileset);
+    const auto doc = nlohmann::json::parse(tileset);
+    const int levels = doc["root"]["children"][0]["implicitTiling"]["subtreeLevels"];
+
+    // From each root's subtree file, through the child subtrees each lists.
+    std::map<std::string, std::string> expected; // relative path -> bytes
+    for (int r = 0; r < 2; ++r) {
+        std::vector<std::array<std::int64_t, 3>> todo{{0, 0, 0}};
+        while (!todo.empty()) {
+            const auto [level, sx, sy] = todo.back();
+            todo.pop_back();
+            const std::string at = std::to_string(r) + "/" + std::to_string(level) + "/" +
+                                   std::to_string(sx) + "/" + std::to_string(sy);
+            std::string bytes;
+            REQUIRE(layer->document("terrain/" + at + ".subtree", bytes));
+            expected[at + ".subtree"] = bytes;
+            const tb_terrain3d::Subtree s = tb_terrain3d::read_subtree(bytes);
+            std::size_t offset = 0;
+            for (int l = 0; l < levels && level + l <= layer->max_zoom(); ++l) {
+                const std::int64_t side = std::int64_t{1} << l;
+                for (std::int64_t j = 0; j < side; ++j) {
+                    for (std::int64_t i = 0; i < side; ++i) {
+                        if (!s.available(s.doc["tileAvailability"],
+                                         offset + tb_terrain3d::morton(i, j))) {
+                            continue;
+                        }
+                        const int z = static_cast<int>(level) + l;
+                        const std::int64_t x = sx * side + i, y = sy * side + j;
+                        expected[std::to_string(r) + "/" + std::to_string(z) + "/" +
+                                 std::to_string(x) + "/" + std::to_string(y) + ".glb"] =
+                            layer->make_tile(TileId{z, (std::int64_t{r} << z) + x, y},
+                                             Format::Terrain3d);
+                    }
+                }
+                offset += static_cast<std::size_t>(side * side);
+            }
+            if (level + levels <= layer->max_zoom()) {
+                const std::int64_t side = std::int64_t{1} << levels;
+                for (std::int64_t j = 0; j < side; ++j) {
+                    for (std::int64_t i = 0; i < side; ++i) {
+                        if (s.available(s.doc["childSubtreeAvailability"],
+                                        tb_terrain3d::morton(i, j))) {
+                            todo.push_back({level + levels, sx * side + i, sy * side + j});
+                        }
+                    }
+                }
+            }
+        }
+    }
+    std::map<std::string, std::string> written;
+    for (const auto& [rel, bytes] : tree(root)) {
+        if (rel.ends_with(".glb") || rel.ends_with(".subtree")) { // not the .crc32 sidecars
+            written[rel] = bytes;
+        }
+    }
+    for (const auto& [rel, bytes] : written) {
+        CHECK_MESSAGE(expected.count(rel) == 1, rel << " was written but is listed nowhere");
+    }
+    CHECK(written.size() == expected.size());
+    CHECK((written == expected));
+    CHECK(written.count("0/0/0/0.glb") == 1);
+    CHECK(written.count("1/0/0/0.glb") == 1);
+    CHECK(written.count("0/0/0/0.subtree") == 1);
+
+    const Run b = run(args(dem, dir / "out.sqlite", {"--formats", "terrain3d"}), dir);
+    INFO(b.err);
+    REQUIRE(b.code == 0);
+    const auto store = TileStore::open(dir / "out.sqlite");
+    CHECK(store->get_document("terrain", "terrain/tileset.json") == tileset);
+    for (const auto& [rel, bytes] : expected) {
+        if (rel.ends_with(".subtree")) {
+            CHECK(store->get_document("terrain", "terrain/" + rel) == bytes);
+        }
+    }
+    std::size_t in_db = 0;
+    for (const auto& [key, bytes] : sqlite_tiles(dir / "out.sqlite")) {
+        in_db += key.rfind("terrain/terrain3d/", 0) == 0 ? 1 : 0;
+    }
+    CHECK(in_db == static_cast<std::size_t>(
+                       std::count_if(expected.begin(), expected.end(), [](const auto& e) {
+                           return e.first.ends_with(".glb");
+                       })));
 }

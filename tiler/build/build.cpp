@@ -5,6 +5,7 @@
 #include "tiler/build/build.hpp"
 
 #include "tiler/formats/quantized_mesh.hpp"
+#include "tiler/formats/terrain_tiles.hpp"
 
 #include "core/error.hpp"
 #include "tiler/dem_tiles.hpp"
@@ -288,7 +289,11 @@ void add_ranges(Plan& plan,
 
 bool wants_terrain(const Layer& layer, const BuildOptions& o) {
     return layer.options().scheme == Scheme::Geodetic &&
-           std::find(o.formats.begin(), o.formats.end(), Format::Terrain) != o.formats.end();
+           std::any_of(o.formats.begin(), o.formats.end(), is_terrain_format);
+}
+
+bool wants(const BuildOptions& o, Format f) {
+    return std::find(o.formats.begin(), o.formats.end(), f) != o.formats.end();
 }
 
 TerrainSpec terrain_spec_of(const Layer& layer) {
@@ -302,19 +307,25 @@ TerrainSpec terrain_spec_of(const Layer& layer) {
 // Whether tile id is made in format f: DEM and terrain tiles wherever planned, mesh tiles where
 // the layer may have data.
 bool makes(const Layer& layer, Format f, const TileId& id) {
-    return is_dem_format(f) || f == Format::Terrain || layer.may_have_tile(id);
+    return is_dem_format(f) || is_terrain_format(f) || layer.may_have_tile(id);
 }
 
-// Writes layer.json when every tile it lists as available is in the store (a --bbox build
-// leaves some out: then it is not written, and a warning says so). Returns whether it was.
-bool write_layer_json(const Layer& layer, TileStore& store, const std::string& name) {
+// Whether every terrain tile of `format` that layer.json and the terrain tileset list as
+// available is in the store (a --bbox build leaves some out: a warning names one, and what
+// lists them is then not written).
+bool terrain_complete(const Layer& layer,
+                      TileStore& store,
+                      const std::string& name,
+                      Format format) {
     const TerrainSpec spec = terrain_spec_of(layer);
     for (int z = 0; z <= spec.max_zoom; ++z) {
         const TileRange r = terrain_available(spec, z);
         for (std::int64_t y = r.y0; y <= r.y1; ++y) {
             for (std::int64_t x = r.x0; x <= r.x1; ++x) {
-                if (!store.contains(TileKey{name, TileId{z, x, y}, Format::Terrain, -1})) {
-                    log::warn("build: layer.json not written: it lists terrain tile " +
+                if (!store.contains(TileKey{name, TileId{z, x, y}, format, -1})) {
+                    log::warn(std::string("build: ") +
+                              (format == Format::Terrain ? "layer.json" : "terrain/tileset.json") +
+                              " not written: it lists " + format_name(format) + " tile " +
                               tile_name(TileId{z, x, y}) +
                               ", which is not in the store (build it, e.g. with --resume and no "
                               "--bbox)");
@@ -323,11 +334,63 @@ bool write_layer_json(const Layer& layer, TileStore& store, const std::string& n
             }
         }
     }
+    return true;
+}
+
+// Writes layer.json when every tile it lists is in the store. Returns whether it was.
+bool write_layer_json(const Layer& layer, TileStore& store, const std::string& name) {
+    if (!terrain_complete(layer, store, name, Format::Terrain)) {
+        return false;
+    }
+    const TerrainSpec spec = terrain_spec_of(layer);
     std::string text;
     layer.document("layer.json", text);
     store.put_document(name, "layer.json", text);
     log::info("build: wrote layer.json (quantized-mesh terrain, zooms 0.." +
               std::to_string(spec.max_zoom) + ")");
+    return true;
+}
+
+// Writes the 3D Tiles terrain documents when every tile they list is in the store: each
+// subtree reachable from the two roots, then terrain/tileset.json last. Returns whether it did.
+bool write_terrain_tileset(const Layer& layer, TileStore& store, const std::string& name) {
+    if (!terrain_complete(layer, store, name, Format::Terrain3d)) {
+        return false;
+    }
+    std::size_t written = 0;
+    for (int root = 0; root < 2; ++root) {
+        std::vector<std::array<std::int64_t, 3>> todo{{0, 0, 0}};
+        while (!todo.empty()) {
+            const auto [level, x, y] = todo.back();
+            todo.pop_back();
+            const std::string path = "terrain/" + std::to_string(root) + "/" +
+                                     std::to_string(level) + "/" + std::to_string(x) + "/" +
+                                     std::to_string(y) + ".subtree";
+            std::string bytes;
+            if (!layer.document(path, bytes)) {
+                continue;
+            }
+            store.put_document(name, path, bytes);
+            ++written;
+            // The child subtrees are those whose root tile is available.
+            const int child = static_cast<int>(level) + kTerrainSubtreeLevels;
+            const TileRange r = terrain_available(terrain_spec_of(layer), child);
+            const std::int64_t side = std::int64_t{1} << kTerrainSubtreeLevels;
+            const std::int64_t offset = std::int64_t{root} << child;
+            for (std::int64_t j = y * side; !r.empty() && j < (y + 1) * side; ++j) {
+                for (std::int64_t i = x * side; i < (x + 1) * side; ++i) {
+                    if (offset + i >= r.x0 && offset + i <= r.x1 && j >= r.y0 && j <= r.y1) {
+                        todo.push_back({child, i, j});
+                    }
+                }
+            }
+        }
+    }
+    std::string text;
+    layer.document("terrain/tileset.json", text);
+    store.put_document(name, "terrain/tileset.json", text);
+    log::info("build: wrote terrain/tileset.json (3D Tiles terrain, zooms 0.." +
+              std::to_string(layer.max_zoom()) + ", " + std::to_string(written) + " subtrees)");
     return true;
 }
 
@@ -614,7 +677,8 @@ void check_options(const BuildOptions& o) {
     }
     if (o.formats.empty()) {
         throw InputError(
-            "build: --formats: name at least one of glb, drc, terrarium, mapbox, terrain");
+            "build: --formats: name at least one of glb, drc, terrarium, mapbox, terrain, "
+            "terrain3d");
     }
     for (std::size_t i = 0; i < o.formats.size(); ++i) {
         for (std::size_t j = 0; j < i; ++j) {
@@ -792,8 +856,11 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
         store->clean_up(name);
         summary.tileset_written =
             mesh_formats && write_tileset(*layer, *store, name, o.bbox.has_value());
-        if (terrain) {
+        if (terrain && wants(o, Format::Terrain)) {
             write_layer_json(*layer, *store, name);
+        }
+        if (terrain && wants(o, Format::Terrain3d)) {
+            write_terrain_tileset(*layer, *store, name);
         }
         if (mesh_formats && !summary.tileset_written) {
             throw IoError(where + ": --finalize: tiles the tileset lists are missing although "
@@ -1001,17 +1068,21 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
             // A build of DEM tiles alone has no mesh tiles for a tileset to list.
             summary.tileset_written =
                 mesh_formats && write_tileset(*layer, *store, name, o.bbox.has_value());
-            if (terrain) {
+            if (terrain && wants(o, Format::Terrain)) {
                 write_layer_json(*layer, *store, name);
+            }
+            if (terrain && wants(o, Format::Terrain3d)) {
+                write_terrain_tileset(*layer, *store, name);
             }
         }
     }
     summary.over_eps = static_cast<std::int64_t>(layer->tiles_over_eps());
     if (summary.over_eps > 0) {
         log::warn("build: " + std::to_string(summary.over_eps) +
-                  " tile(s) measured above their zoom's eps at the source's pixels (its CRS is "
-                  "not the scheme's, so tiles are resampled); their tileset entries publish "
-                  "the measured bound");
+                  " tile(s) measured above their zoom's eps at the source's pixels (resampled "
+                  "from a CRS that is not the scheme's, or globe terrain whose quantization "
+                  "exceeds it, counted once per format); each publishes its measured bound "
+                  "(tileset entry, quantized-mesh metadata, glb asset.extras)");
     }
     summary.seconds = std::chrono::duration<double>(Clock::now() - start).count();
     return summary;
