@@ -1,7 +1,10 @@
-// quantized-mesh terrain over real loopback HTTP: layer.json, the Accept negotiation of
+// Globe terrain over real loopback HTTP. quantized-mesh: layer.json, the Accept negotiation of
 // extensions (checked with the independent reader of tests/tiler/qm_reader.hpp), Vary and
 // gzip, filler at zoom 0, and the errors of tiles outside the scheme or beyond max zoom.
+// 3D Tiles terrain: terrain/tileset.json, subtrees and glbs (tests/tiler/terrain3d_reader.hpp)
+// and their errors.
 #include "../tiler/qm_reader.hpp"
+#include "../tiler/terrain3d_reader.hpp"
 #include "server_fixture.hpp"
 #include "tiler/formats/quantized_mesh.hpp"
 #include "tiler/layer.hpp"
@@ -212,6 +215,81 @@ TEST_CASE("terrain tiles: filler at zoom 0, 404 beyond max zoom, 400 outside the
     auto no_json = c.Get("/meshonly/layer.json");
     REQUIRE(no_json);
     CHECK(no_json->status == 404);
+}
+
+TEST_CASE("3D Tiles terrain over HTTP: /layers names terrain/tileset.json; its subtrees and "
+          "glbs are the layer's bytes; bad coordinates get 400, beyond max zoom 404") {
+    auto& f = fixture();
+    RunningServer server(
+        {{f.layer, {tiler::Format::Terrain3d}, nullptr},
+         {tiler::Layer::open(test::test_layer_options(fixture().dir / "hills.asc", "qmonly")),
+          {tiler::Format::Terrain},
+          nullptr}});
+    auto c = server.client();
+    auto layers = c.Get("/layers");
+    REQUIRE(layers);
+    const auto list = nlohmann::json::parse(layers->body);
+    CHECK(list["layers"][0]["terrain_tileset"] == "/hills/terrain/tileset.json");
+    CHECK_FALSE(list["layers"][0].contains("layer_json"));
+    CHECK_FALSE(list["layers"][1].contains("terrain_tileset"));
+
+    auto ts = c.Get("/hills/terrain/tileset.json");
+    REQUIRE(ts);
+    REQUIRE(ts->status == 200);
+    CHECK(ts->get_header_value("Content-Type") == "application/json");
+    std::string doc;
+    REQUIRE(f.layer->document("terrain/tileset.json", doc));
+    CHECK(ts->body == doc);
+
+    auto sub = c.Get("/hills/terrain/0/0/0/0.subtree");
+    REQUIRE(sub);
+    REQUIRE(sub->status == 200);
+    CHECK(sub->get_header_value("Content-Type") == "application/octet-stream");
+    REQUIRE(f.layer->document("terrain/0/0/0/0.subtree", doc));
+    CHECK(sub->body == doc);
+    const tb_terrain3d::Subtree s = tb_terrain3d::read_subtree(sub->body);
+    CHECK(s.available(s.doc["tileAvailability"], 0)); // the root tile
+
+    // A tile of the finest zoom under the data, through its implicit coordinates.
+    const tiler::TileRange r = f.layer->tiles_at(f.layer->max_zoom());
+    const tiler::TileId id{r.z, r.x0, r.y0};
+    const std::int64_t side = std::int64_t{1} << id.z;
+    const std::string url = "/hills/terrain/" + std::to_string(id.x / side) + "/" +
+                            std::to_string(id.z) + "/" + std::to_string(id.x % side) + "/" +
+                            std::to_string(id.y) + ".glb";
+    auto glb = c.Get(url.c_str(), {{"Accept-Encoding", "gzip"}});
+    REQUIRE(glb);
+    REQUIRE(glb->status == 200);
+    CHECK(glb->get_header_value("Content-Type") == "model/gltf-binary");
+    CHECK(glb->body == f.layer->make_tile(id, tiler::Format::Terrain3d));
+    const tb_terrain3d::Glb g = tb_terrain3d::read_glb(glb->body);
+    CHECK(g.drawn.indices.size() >= 6);
+    CHECK(g.normals.size() == g.drawn.ecef.size());
+
+    for (const char* bad : {"/hills/terrain/2/0/0/0.glb",
+                            "/hills/terrain/0/1/2/0.glb",
+                            "/hills/terrain/0/1/0/2.glb",
+                            "/hills/terrain/0/x/0/0.glb",
+                            "/hills/terrain/0/99/0/0.glb"}) {
+        CAPTURE(bad);
+        auto res = c.Get(bad);
+        REQUIRE(res);
+        CHECK(res->status == 400);
+    }
+    const std::string deep =
+        "/hills/terrain/0/" + std::to_string(f.layer->max_zoom() + 1) + "/0/0.glb";
+    auto beyond = c.Get(deep.c_str());
+    REQUIRE(beyond);
+    CHECK(beyond->status == 404);
+    for (const char* missing : {"/hills/terrain/0/1/0/0.subtree",
+                                "/hills/terrain/nothing.json",
+                                "/qmonly/terrain/tileset.json",
+                                "/qmonly/terrain/0/0/0/0.glb"}) {
+        CAPTURE(missing);
+        auto res = c.Get(missing);
+        REQUIRE(res);
+        CHECK(res->status == 404);
+    }
 }
 
 } // namespace

@@ -5,13 +5,12 @@
 // decoded with meshoptimizer's own decoder and whose positions are placed in ECEF as CesiumJS
 // places them: p / 65535 (16-bit) or the float32 values, through nodes[0].matrix, then glTF's
 // y-up to z-up.
-#include "source_oracle.hpp"
-
 #include <doctest/doctest.h>
 #include <meshoptimizer.h>
 #include <nlohmann/json.hpp>
 
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <string>
@@ -20,6 +19,13 @@
 namespace tb_terrain3d {
 
 using json = nlohmann::json;
+using V3 = std::array<double, 3>;
+
+// Triangles between ECEF vertices (the layout of tb_oracle::Drawn, source_oracle.hpp).
+struct Drawn {
+    std::vector<V3> ecef;
+    std::vector<std::uint32_t> indices;
+};
 
 inline std::uint32_t u32(const std::string& b, std::size_t at) {
     REQUIRE(at + 4 <= b.size());
@@ -93,8 +99,8 @@ inline std::uint64_t morton(std::uint64_t x, std::uint64_t y) {
 
 struct Glb {
     json doc;
-    tb_oracle::Drawn drawn;                          // ECEF vertices, triangle indices
-    std::vector<tb_oracle::V3> normals;              // ECEF unit normals as CesiumJS derives them
+    Drawn drawn;                                     // ECEF vertices, triangle indices
+    std::vector<V3> normals;                         // ECEF unit normals as CesiumJS derives them
     std::array<std::vector<std::uint32_t>, 4> edges; // left (west), bottom, right, top
     double published = 0;                            // asset.extras.geometricError
 };
@@ -167,7 +173,7 @@ inline Glb read_glb(const std::string& b) {
         for (int r = 0; r < 3; ++r) {
             y[r] = m[r] * p[0] + m[4 + r] * p[1] + m[8 + r] * p[2] + w * m[12 + r];
         }
-        return tb_oracle::V3{y[0], -y[2], y[1]};
+        return V3{y[0], -y[2], y[1]};
     };
     const std::size_t pos_acc = prim.at("attributes").at("POSITION");
     const json& pa = d.at("accessors").at(pos_acc);
@@ -198,7 +204,7 @@ inline Glb read_glb(const std::string& b) {
         for (std::size_t k = 0; k < n; ++k) {
             float f[3];
             std::memcpy(f, bytes.data() + 12 * k, 12);
-            tb_oracle::V3 e = apply({f[0], f[1], f[2]}, 0);
+            V3 e = apply({f[0], f[1], f[2]}, 0);
             const double len = std::sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
             g.normals.push_back({e[0] / len, e[1] / len, e[2] / len});
         }
