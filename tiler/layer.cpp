@@ -155,8 +155,19 @@ public:
         }
         const MeshedTile t = mesh_tile_at(id, eps);
         EncodeReport report;
-        std::string bytes =
-            encode_tile(t.raster, t.mesh, format, t.budget, t.source_pixels, &report);
+        // Shading normals, the same function of position as the terrain tiles' (encode_tile
+        // neither adds nor reorders vertices, so they stay aligned with the mesh).
+        std::vector<std::array<double, 3>> normals;
+        if (t.mesh.triangle_count() > 0) {
+            normals = vertex_normals(t, id);
+        }
+        std::string bytes = encode_tile(t.raster,
+                                        t.mesh,
+                                        format,
+                                        t.budget,
+                                        t.source_pixels,
+                                        &report,
+                                        normals.empty() ? nullptr : &normals);
         if (guarantee() == Guarantee::Measured) {
             note_measured(id, eps, report);
         }
