@@ -153,12 +153,18 @@ public:
             throw InputError("tile " + tile_name(id) +
                              ": quantized-mesh tiles are made at their zoom's eps only");
         }
+        return encode_at(id, format, eps, true);
+    }
+
+    // make_tile_at; without `with_normals` the tile carries no normals (tile_error only
+    // measures, and the normals would cost another read of the source).
+    std::string encode_at(const TileId& id, Format format, double eps, bool with_normals) const {
         const MeshedTile t = mesh_tile_at(id, eps);
         EncodeReport report;
         // Shading normals, the same function of position as the terrain tiles' (encode_tile
         // neither adds nor reorders vertices, so they stay aligned with the mesh).
         std::vector<std::array<double, 3>> normals;
-        if (t.mesh.triangle_count() > 0) {
+        if (with_normals && t.mesh.triangle_count() > 0) {
             normals = vertex_normals(t, id);
         }
         std::string bytes = encode_tile(t.raster,
@@ -235,7 +241,7 @@ public:
             }
         }
         try {
-            make_tile_at(id, Format::Glb, eps); // measures and records it
+            encode_at(id, Format::Glb, eps, false); // measures and records it
         } catch (const NotFound&) {
             return budget_at(id.z, eps).drawn_bound;
         }
