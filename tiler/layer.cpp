@@ -232,10 +232,27 @@ public:
             throw InputError("tile " + tile_name(id) +
                              ": globe terrain tiles are made at their zoom's eps only");
         }
+        return encode_at(id, format, eps, true);
+    }
+
+    // make_tile_at; without `with_normals` the tile carries no normals (tile_error only
+    // measures, and the normals would cost another read of the source).
+    std::string encode_at(const TileId& id, Format format, double eps, bool with_normals) const {
         const MeshedTile t = mesh_tile_at(id, eps);
         EncodeReport report;
-        std::string bytes =
-            encode_tile(t.raster, t.mesh, format, t.budget, t.source_pixels, &report);
+        // Shading normals, the same function of position as the terrain tiles' (encode_tile
+        // neither adds nor reorders vertices, so they stay aligned with the mesh).
+        std::vector<std::array<double, 3>> normals;
+        if (with_normals && t.mesh.triangle_count() > 0) {
+            normals = vertex_normals(t, id);
+        }
+        std::string bytes = encode_tile(t.raster,
+                                        t.mesh,
+                                        format,
+                                        t.budget,
+                                        t.source_pixels,
+                                        &report,
+                                        normals.empty() ? nullptr : &normals);
         if (guarantee() == Guarantee::Measured) {
             note_measured(id, eps, report);
         }
@@ -303,7 +320,7 @@ public:
             }
         }
         try {
-            make_tile_at(id, Format::Glb, eps); // measures and records it
+            encode_at(id, Format::Glb, eps, false); // measures and records it
         } catch (const NotFound&) {
             return budget_at(id.z, eps).drawn_bound;
         }
@@ -501,24 +518,43 @@ private:
     // heights at the vertex's lon/lat: a pure function of where the vertex is and of the source,
     // so a vertex two tiles share gets the same normal in both. Pixel layers: central
     // differences one pixel either side on the bilinear surface of the source's pixels (voids
-    // left out of the weights); other layers: central differences on the zoom's lattice.
+    // left out of the weights); other layers: central differences on the zoom's lattice. The
+    // differences are taken in the grid's own units (degrees, or EPSG:3857 metres for a
+    // mercator grid) and turned into ground slopes with the ellipsoid's radii at the vertex.
     std::vector<std::array<double, 3>> vertex_normals(const MeshedTile& t, const TileId& id) const {
         constexpr double kDeg = 3.14159265358979323846 / 180;
         constexpr double kA = 6378137.0, kE2 = 6.69437999014e-3;
         const TileMesh& m = t.mesh;
+        const Scheme scheme = options_.scheme;
         std::vector<std::array<double, 3>> out(m.vertex_count());
-        // Gradient (dh/dx, dh/dy) per vertex in source units per degree, or per lattice step.
+        std::vector<LonLat> ll(m.vertex_count());
+        for (std::size_t v = 0; v < m.vertex_count(); ++v) {
+            ll[v] = native_to_lonlat(scheme, m.x[v], m.y[v]);
+        }
+        // Gradient (dh/dx, dh/dy) per vertex, as the height difference across two steps of
+        // step_x, step_y grid units; `degrees`: those units are degrees, else EPSG:3857 metres.
         std::vector<double> gx(m.vertex_count()), gy(m.vertex_count());
-        double step_x = 0, step_y = 0; // degrees between the two probes / 2
-        if (pixels_ && pixels_->lonlat) {
+        double step_x = 0, step_y = 0;
+        bool degrees = scheme == Scheme::Geodetic;
+        if (pixels_) {
             const PixelGrid& g = *pixels_;
-            const LonLatBox b = tile_bounds(options_.scheme, id);
+            degrees = g.lonlat;
+            // A vertex in the pixel grid's units: lon/lat, or (mercator scheme) its native metres.
+            const auto grid_xy = [&](std::size_t v) {
+                return g.lonlat ? std::pair{ll[v].lon, ll[v].lat} : std::pair{m.x[v], m.y[v]};
+            };
+            const LonLatBox b = tile_bounds(scheme, id);
+            double west = b.west, north = b.north, east = b.east, south = b.south;
+            if (!g.lonlat) {
+                lonlat_to_native(scheme, {b.west, b.north}, west, north);
+                lonlat_to_native(scheme, {b.east, b.south}, east, south);
+            }
             const auto col = [&g](double x) { return (x - g.x0) / g.dx - 0.5; };
             const auto row = [&g](double y) { return (g.y0 - y) / g.dy - 0.5; };
-            const std::int64_t c0 = static_cast<std::int64_t>(std::floor(col(b.west))) - 3;
-            const std::int64_t r0 = static_cast<std::int64_t>(std::floor(row(b.north))) - 3;
-            const int w = static_cast<int>(std::ceil(col(b.east)) - static_cast<double>(c0)) + 4;
-            const int h = static_cast<int>(std::ceil(row(b.south)) - static_cast<double>(r0)) + 4;
+            const std::int64_t c0 = static_cast<std::int64_t>(std::floor(col(west))) - 3;
+            const std::int64_t r0 = static_cast<std::int64_t>(std::floor(row(north))) - 3;
+            const int w = static_cast<int>(std::ceil(col(east)) - static_cast<double>(c0)) + 4;
+            const int h = static_cast<int>(std::ceil(row(south)) - static_cast<double>(r0)) + 4;
             const std::vector<double> px = source_->read_pixels(c0, r0, w, h);
             const auto bilinear = [&](double fc, double fr, double& value) {
                 const double ic = std::floor(fc), ir = std::floor(fr);
@@ -544,19 +580,24 @@ private:
             };
             step_x = g.dx, step_y = g.dy;
             for (std::size_t v = 0; v < m.vertex_count(); ++v) {
-                const double fc = col(m.x[v]), fr = row(m.y[v]);
+                const auto [x, y] = grid_xy(v);
+                const double fc = col(x), fr = row(y);
                 double e = 0, wst = 0, n = 0, s = 0;
                 gx[v] = bilinear(fc + 1, fr, e) && bilinear(fc - 1, fr, wst) ? (e - wst) : 0.0;
                 gy[v] = bilinear(fc, fr - 1, n) && bilinear(fc, fr + 1, s) ? (n - s) : 0.0;
             }
         } else {
             const int n = options_.tile_size;
-            const std::int64_t c0 = tile_first_column(options_.scheme, id, n) - 1;
-            const std::int64_t r0 = tile_first_row(options_.scheme, id, n) - 1;
+            const std::int64_t c0 = tile_first_column(scheme, id, n) - 1;
+            const std::int64_t r0 = tile_first_row(scheme, id, n) - 1;
             const int w = n + 3;
-            const LatticeBlock block = source_->sample(options_.scheme, id.z, n, c0, r0, w, w);
-            step_x = step_y =
-                (tile_bounds(options_.scheme, id).east - tile_bounds(options_.scheme, id).west) / n;
+            const LatticeBlock block = source_->sample(scheme, id.z, n, c0, r0, w, w);
+            TileRaster lattice;
+            lattice.id = id;
+            lattice.scheme = scheme;
+            lattice.size = n;
+            const GridFrame f = frame_of(lattice); // native units, the zoom's lattice
+            step_x = f.dx, step_y = f.dy;
             const auto at = [&](int i, int j, double& value) {
                 if (i < 0 || j < 0 || i >= w || j >= w) {
                     return false;
@@ -566,23 +607,25 @@ private:
                 return block.valid[k] != 0;
             };
             for (std::size_t v = 0; v < m.vertex_count(); ++v) {
-                double column = 0, r = 0;
-                lonlat_to_grid(t.raster, {m.x[v], m.y[v]}, column, r);
-                const int i = static_cast<int>(std::lround(column)) + 1;
-                const int j = static_cast<int>(std::lround(r)) + 1;
+                const int i = static_cast<int>(std::lround((m.x[v] - f.x0) / f.dx)) + 1;
+                const int j = static_cast<int>(std::lround((f.y0 - m.y[v]) / f.dy)) + 1;
                 double e = 0, wst = 0, nn = 0, s = 0;
                 gx[v] = at(i + 1, j, e) && at(i - 1, j, wst) ? (e - wst) : 0.0;
                 gy[v] = at(i, j - 1, nn) && at(i, j + 1, s) ? (nn - s) : 0.0;
             }
         }
         for (std::size_t v = 0; v < m.vertex_count(); ++v) {
-            const double lon = m.x[v] * kDeg, lat = m.y[v] * kDeg;
+            const double lon = ll[v].lon * kDeg, lat = ll[v].lat * kDeg;
             const double sl = std::sin(lat), cl = std::cos(lat);
             const double w2 = 1 - kE2 * sl * sl;
-            const double metres_lon = kA / std::sqrt(w2) * cl * kDeg; // per degree
-            const double metres_lat = kA * (1 - kE2) / (w2 * std::sqrt(w2)) * kDeg;
-            const double de = gx[v] / (2 * step_x * std::max(metres_lon, 1e-6));
-            const double dn = gy[v] / (2 * step_y * metres_lat);
+            const double radius_lon = kA / std::sqrt(w2) * cl;               // metres per radian
+            const double radius_lat = kA * (1 - kE2) / (w2 * std::sqrt(w2)); // metres per radian
+            // Ground metres per grid unit: per degree, or per EPSG:3857 metre (x = a lon,
+            // y = a ln tan(pi/4 + lat/2), so dlon/dx = 1/a and dlat/dy = cos(lat)/a).
+            const double metres_x = degrees ? radius_lon * kDeg : radius_lon / kA;
+            const double metres_y = degrees ? radius_lat * kDeg : radius_lat * cl / kA;
+            const double de = gx[v] / (2 * step_x * std::max(metres_x, 1e-6));
+            const double dn = gy[v] / (2 * step_y * metres_y);
             const std::array<double, 3> east{-std::sin(lon), std::cos(lon), 0};
             const std::array<double, 3> north{-sl * std::cos(lon), -sl * std::sin(lon), cl};
             const std::array<double, 3> up{cl * std::cos(lon), cl * std::sin(lon), sl};

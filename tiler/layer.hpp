@@ -106,7 +106,8 @@ public:
     // orthometric, i.e. on the geoid). Same errors as make_tile.
     virtual TileRaster make_raster(const TileId& id) const = 0;
     // The encoded tile at an explicit published eps (metres, >= 0.001): raster, then
-    // core::triangulate at error_budget(eps).mesh_eps with locked borders, then encode_tile.
+    // core::triangulate at error_budget(eps).mesh_eps with locked borders, then encode_tile with
+    // the vertex normals of the DEM's slope (those of the terrain tiles' octvertexnormals).
     virtual std::string make_tile_at(const TileId& id, Format format, double eps) const = 0;
     // The mesh make_tile_at encodes, with its samples and budget. Same errors as make_tile.
     virtual MeshedTile mesh_tile_at(const TileId& id, double eps) const = 0;

@@ -12,6 +12,7 @@
 #include <doctest/doctest.h>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <fstream>
@@ -552,4 +553,83 @@ TEST_CASE("tiny tiles at fine eps still decode exactly onto the lattice") {
         }
     }
     CHECK(encoded >= 24);
+}
+
+TEST_CASE("normals handed to encode_tile decode at their own vertices, in each format's axes, "
+          "and move no position (seed 4)") {
+    const TileRaster r = make_raster({12, 2000, 1500}, 32, hills(4, 100));
+    const core::Mesh mesh = full_grid_mesh(r);
+    const TileMesh tm = to_tile_mesh(r, mesh, false);
+    const ErrorBudget b = error_budget(1.0);
+    // A unit ECEF vector that changes by tens of degrees from one sample to the next, so a
+    // normal that reached another vertex would show.
+    const auto field = [](double lon, double lat) {
+        const double l = lon * 3.14159265358979323846 / 180, p = lat * 3.14159265358979323846 / 180;
+        const std::array<double, 3> east{-std::sin(l), std::cos(l), 0};
+        const std::array<double, 3> north{
+            -std::sin(p) * std::cos(l), -std::sin(p) * std::sin(l), std::cos(p)};
+        const std::array<double, 3> up{
+            std::cos(p) * std::cos(l), std::cos(p) * std::sin(l), std::sin(p)};
+        const double a = 0.6 * std::sin(lon * 500), c = 0.4 * std::cos(lat * 700);
+        std::array<double, 3> n{};
+        double len = 0;
+        for (int k = 0; k < 3; ++k) {
+            n[k] = up[k] + a * east[k] + c * north[k];
+            len += n[k] * n[k];
+        }
+        for (double& v : n) {
+            v /= std::sqrt(len);
+        }
+        return n;
+    };
+    std::vector<std::array<double, 3>> normals;
+    for (std::size_t v = 0; v < tm.vertex_count(); ++v) {
+        normals.push_back(field(tm.x[v], tm.y[v]));
+    }
+    for (Format f : {Format::Glb, Format::Drc}) {
+        CAPTURE(f == Format::Glb ? "glb" : "drc");
+        const std::string with = encode_tile(r, tm, f, b, {}, nullptr, &normals);
+        const DecodedTile d = f == Format::Glb ? decode_glb(with) : decode_drc(with);
+        const DecodedTile plain = f == Format::Glb ? decode_glb(encode_tile(r, tm, f, b))
+                                                   : decode_drc(encode_tile(r, tm, f, b));
+        CHECK(plain.normals.empty());
+        // Normals move no position (Draco may visit the vertices in another order).
+        auto sorted = [](std::vector<std::array<double, 3>> p) {
+            std::sort(p.begin(), p.end());
+            return p;
+        };
+        CHECK(sorted(d.positions) == sorted(plain.positions));
+        CHECK(d.indices.size() == plain.indices.size());
+        REQUIRE(d.normals.size() == d.positions.size());
+        const std::vector<Ecef> world = decoded_ecef(d, f);
+        double worst = 0;
+        for (std::size_t v = 0; v < world.size(); ++v) {
+            const Geodetic g = to_geodetic(world[v]);
+            const std::array<double, 3> want = field(g.lon, g.lat);
+            std::array<double, 3> got{};
+            const auto& n = d.normals[v];
+            if (f == Format::Glb) {
+                got = {n[0], -n[2], n[1]}; // glTF y-up (X, Y, Z) is ECEF (X, -Z, Y)
+            } else {
+                const EnuFrame frame = enu_frame({d.metadata.doubles.at("origin_lon_deg"),
+                                                  d.metadata.doubles.at("origin_lat_deg"),
+                                                  d.metadata.doubles.at("origin_h_m")});
+                for (int a = 0; a < 3; ++a) {
+                    got[a] =
+                        frame.axes[0][a] * n[0] + frame.axes[1][a] * n[1] + frame.axes[2][a] * n[2];
+                }
+            }
+            const double c = got[0] * want[0] + got[1] * want[1] + got[2] * want[2];
+            worst = std::max(worst, std::acos(std::min(1.0, c)) * 180 / 3.14159265358979323846);
+        }
+        MESSAGE("worst decoded normal vs given: " << worst << " deg at " << kNormalBits << " bits");
+        CHECK(worst < 0.25);
+    }
+    // A tile of voids only stays an empty scene: no material, no accessor.
+    const TileMesh none;
+    const std::vector<std::array<double, 3>> no_normals;
+    const DecodedTile empty =
+        decode_glb(encode_tile(r, none, Format::Glb, b, {}, nullptr, &no_normals));
+    CHECK(empty.json.find("materials") == std::string::npos);
+    CHECK(empty.positions.empty());
 }

@@ -64,6 +64,21 @@ DecodedTile decode_drc(std::string_view bytes) {
         }
         out.positions[i.value()] = {double(p[0]), double(p[1]), double(p[2])};
     }
+    if (const draco::PointAttribute* nrm =
+            mesh->GetNamedAttribute(draco::GeometryAttribute::NORMAL)) {
+        if (nrm->num_components() != 3) {
+            throw InputError("drc: the NORMAL attribute has " +
+                             std::to_string(nrm->num_components()) + " components, expected 3");
+        }
+        out.normals.resize(mesh->num_points());
+        for (draco::PointIndex i(0); i < mesh->num_points(); ++i) {
+            float n[3];
+            if (!nrm->ConvertValue<float, 3>(nrm->mapped_index(i), n)) {
+                throw InputError("drc: NORMAL values are not convertible to float");
+            }
+            out.normals[i.value()] = {double(n[0]), double(n[1]), double(n[2])};
+        }
+    }
     out.indices.reserve(std::size_t{mesh->num_faces()} * 3);
     for (draco::FaceIndex f(0); f < mesh->num_faces(); ++f) {
         for (int k = 0; k < 3; ++k) {

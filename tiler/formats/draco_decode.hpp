@@ -1,6 +1,6 @@
 #pragma once
-// Decoding what encode_tile writes, back to positions, triangles and metadata: used by tests
-// and by build/server self-checks. Reads the glb layout encode_tile produces (one primitive
+// Decoding what encode_tile writes, back to positions, normals, triangles and metadata: used by
+// tests and by build/server self-checks. Reads the glb layout encode_tile produces (one primitive
 // whose Draco data is buffer view 0), not arbitrary glTF.
 #include <array>
 #include <cstdint>
@@ -39,6 +39,9 @@ struct DecodedTile {
     // Positions exactly as a client decodes them (float32 widened to double), in the file's
     // frame: glb = glTF y-up axes relative to `translation`; drc = ENU metres, z up.
     std::vector<std::array<double, 3>> positions;
+    // Vertex normals as decoded (Draco's octahedral dequantization, unit length), in the
+    // positions' axes, one per position; empty when the mesh has no NORMAL attribute.
+    std::vector<std::array<double, 3>> normals;
     std::vector<std::uint32_t> indices;  // 3 per triangle, in decoded order
     std::array<double, 3> translation{}; // glb root node translation (y-up axes); drc: zero
     std::string json;                    // glb JSON chunk; empty for drc

@@ -40,6 +40,11 @@ constexpr int kMaxLatticeBits = 23;
 constexpr std::uint32_t kGlbMagic = 0x46546C67; // "glTF"
 constexpr std::uint32_t kChunkJson = 0x4E4F534A;
 constexpr std::uint32_t kChunkBin = 0x004E4942;
+// The one material of a non-empty glb: matte (no metal, full roughness) in a light grey-brown,
+// so clients light the relief instead of drawing it unshaded. Linear RGB, as glTF wants.
+constexpr const char* kGlbMaterials =
+    R"("materials":[{"name":"terrain","pbrMetallicRoughness":{"baseColorFactor":)"
+    R"([0.5,0.46,0.4,1],"metallicFactor":0,"roughnessFactor":1}}],)";
 
 std::string tile_name(const TileId& id) {
     return std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
@@ -274,6 +279,7 @@ std::string glb_json(const std::array<double, 3>& translation,
                      std::size_t vertex_count,
                      std::size_t index_count,
                      std::uint32_t position_id,
+                     const std::uint32_t* normal_id,
                      std::size_t draco_bytes) {
     const auto vec = [](const std::array<double, 3>& v) {
         return "[" + number(v[0]) + "," + number(v[1]) + "," + number(v[2]) + "]";
@@ -285,13 +291,23 @@ std::string glb_json(const std::array<double, 3>& translation,
     j += R"("extensionsRequired":["KHR_draco_mesh_compression"],)";
     j += R"("scene":0,"scenes":[{"nodes":[0]}],)";
     j += R"("nodes":[{"mesh":0,"translation":)" + vec(translation) + "}],";
-    j += R"("meshes":[{"primitives":[{"attributes":{"POSITION":0},"indices":1,"mode":4,)";
+    // Accessors: 0 POSITION, 1 indices, 2 NORMAL (when present); material 0 for every mesh.
+    j += R"("meshes":[{"primitives":[{"attributes":{"POSITION":0)";
+    j += normal_id ? R"(,"NORMAL":2)" : "";
+    j += R"(},"indices":1,"material":0,"mode":4,)";
     j += R"("extensions":{"KHR_draco_mesh_compression":{"bufferView":0,"attributes":{"POSITION":)" +
-         std::to_string(position_id) + "}}}}]}],";
+         std::to_string(position_id);
+    j += normal_id ? R"(,"NORMAL":)" + std::to_string(*normal_id) : "";
+    j += "}}}}]}],";
+    j += kGlbMaterials;
     j += R"("accessors":[{"componentType":5126,"count":)" + std::to_string(vertex_count) +
          R"(,"type":"VEC3","min":)" + vec(min) + R"(,"max":)" + vec(max) + "},";
     j += R"({"componentType":)" + std::to_string(index_type) + R"(,"count":)" +
-         std::to_string(index_count) + R"(,"type":"SCALAR"}],)";
+         std::to_string(index_count) + R"(,"type":"SCALAR"})";
+    j += normal_id ? R"(,{"componentType":5126,"count":)" + std::to_string(vertex_count) +
+                         R"(,"type":"VEC3"})"
+                   : "";
+    j += "],";
     j += R"("bufferViews":[{"buffer":0,"byteOffset":0,"byteLength":)" +
          std::to_string(draco_bytes) + "}],";
     j += R"("buffers":[{"byteLength":)" + std::to_string(draco_bytes) + "}]}";
@@ -441,8 +457,10 @@ std::string encode_tile(const TileRaster& raster,
                         Format format,
                         const ErrorBudget& budget,
                         const std::vector<CheckPoint>& points,
-                        EncodeReport* report) {
+                        EncodeReport* report,
+                        const std::vector<std::array<double, 3>>* normals) {
     const std::size_t n = mesh.vertex_count();
+    TB_ASSERT(normals == nullptr || normals->size() == n);
     TB_ASSERT(mesh.z.size() == n && mesh.y.size() == n && mesh.border.size() == n);
     TB_ASSERT(mesh.triangles.size() % 3 == 0);
     if (mesh.triangles.empty()) {
@@ -568,6 +586,34 @@ std::string encode_tile(const TileRaster& raster,
                             static_cast<float>(double(snap.q[v][2]) * step)};
         att->SetAttributeValue(draco::AttributeValueIndex(static_cast<std::uint32_t>(v)), p);
     }
+    // Normals in the positions' axes: glb (x, z, -y) of ECEF, drc the ENU frame's axes.
+    draco::PointAttribute* normal_att = nullptr;
+    if (normals) {
+        draco::GeometryAttribute gn;
+        gn.Init(draco::GeometryAttribute::NORMAL,
+                nullptr,
+                3,
+                draco::DT_FLOAT32,
+                false,
+                sizeof(float) * 3,
+                0);
+        normal_att = dm.attribute(dm.AddAttribute(gn, true, static_cast<std::uint32_t>(n)));
+        for (std::size_t v = 0; v < n; ++v) {
+            const std::array<double, 3>& e = (*normals)[v];
+            std::array<double, 3> out{};
+            if (format == Format::Glb) {
+                out = {e[0], e[2], -e[1]};
+            } else {
+                for (int a = 0; a < 3; ++a) {
+                    out[a] = enu.axes[a][0] * e[0] + enu.axes[a][1] * e[1] + enu.axes[a][2] * e[2];
+                }
+            }
+            const float f[3] = {
+                static_cast<float>(out[0]), static_cast<float>(out[1]), static_cast<float>(out[2])};
+            normal_att->SetAttributeValue(draco::AttributeValueIndex(static_cast<std::uint32_t>(v)),
+                                          f);
+        }
+    }
     for (std::size_t t = 0; t < mesh.triangle_count(); ++t) {
         dm.AddFace({draco::PointIndex(mesh.triangles[3 * t]),
                     draco::PointIndex(mesh.triangles[3 * t + 1]),
@@ -610,6 +656,9 @@ std::string encode_tile(const TileRaster& raster,
     const float range = static_cast<float>(double((std::int64_t{1} << snap.bits) - 1) * step);
     encoder.SetAttributeExplicitQuantization(
         draco::GeometryAttribute::POSITION, snap.bits, 3, origin, range);
+    if (normals) {
+        encoder.SetAttributeQuantization(draco::GeometryAttribute::NORMAL, kNormalBits);
+    }
     draco::EncoderBuffer buffer;
     check(encoder.EncodeMeshToBuffer(dm, &buffer), "encoding", raster.id);
     std::string draco_bytes(buffer.data(), buffer.size());
@@ -617,7 +666,8 @@ std::string encode_tile(const TileRaster& raster,
     // Self-check on the decoded data (what clients see): counts kept, every coordinate on the
     // lattice point it was snapped to; glTF min/max are taken from it.
     const DecodedTile decoded = decode_drc(draco_bytes);
-    if (decoded.positions.size() != n || decoded.indices.size() != mesh.triangles.size()) {
+    if (decoded.positions.size() != n || decoded.indices.size() != mesh.triangles.size() ||
+        decoded.normals.size() != (normals ? n : 0)) {
         throw Error("tile " + tile_name(raster.id) + ": Draco changed the mesh (" +
                     std::to_string(n) + " vertices -> " + std::to_string(decoded.positions.size()) +
                     "); this is a bug, please report it with the tile");
@@ -642,8 +692,15 @@ std::string encode_tile(const TileRaster& raster,
     if (format == Format::Drc) {
         return draco_bytes;
     }
-    const std::string json = glb_json(
-        translation, min, max, n, mesh.triangles.size(), att->unique_id(), draco_bytes.size());
+    const std::uint32_t normal_id = normal_att ? normal_att->unique_id() : 0;
+    const std::string json = glb_json(translation,
+                                      min,
+                                      max,
+                                      n,
+                                      mesh.triangles.size(),
+                                      att->unique_id(),
+                                      normal_att ? &normal_id : nullptr,
+                                      draco_bytes.size());
     return glb_container(json, draco_bytes);
 }
 
