@@ -48,7 +48,8 @@ TEST_CASE("a minimal config gets the documented defaults and resolves sources ag
                                                           tb::tiler::Format::Drc,
                                                           tb::tiler::Format::Terrarium,
                                                           tb::tiler::Format::Mapbox,
-                                                          tb::tiler::Format::Terrain});
+                                                          tb::tiler::Format::Terrain,
+                                                          tb::tiler::Format::Terrain3d});
     CHECK(layer.options.dem_tile_size == 512);
     CHECK(layer.options.dem_heights == tb::tiler::DemHeights::SeaLevel);
     CHECK(!layer.store);
@@ -123,7 +124,7 @@ TEST_CASE("every problem of a bad config is reported together with its JSON poin
         path + ": /layers/0/tile_size: expected an integer 2..4096, got 1",
         path + ": /layers/0/max_zoom: expected max_zoom >= min_zoom (9), got 4",
         path + ": /layers/0/formats/0: expected one of \"glb\", \"drc\", \"terrarium\", "
-               "\"mapbox\", \"terrain\", got \"png\"",
+               "\"mapbox\", \"terrain\", \"terrain3d\", got \"png\"",
         path + ": /layers/0/datum: expected one of \"auto\"",
         path + ": /layers/0/extra: unknown key",
         path + ": /layers/1/name: duplicate layer name \"a\" (also /layers/0/name)",
