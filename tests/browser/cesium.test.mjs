@@ -290,22 +290,48 @@ test('the viewer shows a mercator layer as the 3D Tiles model, with a note why',
     }
   });
 
-// The 3D Tiles terrain view is offered once /layers lists terrain_tileset for the layer (the
-// field is faked here, on the page's copy of /layers; the view is not opened).
-test('the view picker offers the 3D Tiles terrain when /layers lists terrain_tileset',
-  { skip: skip || false, timeout: 180000 }, async () => {
+// The 3D Tiles terrain view: /layers lists terrain_tileset for the layer (the server serves
+// terrain3d by default), the view picker offers it, and it draws the layer through
+// Cesium3DTilesTerrainProvider (subtrees, then meshopt glb tiles) with no failed request.
+test("the viewer opens the layer's 3D Tiles terrain through Cesium3DTilesTerrainProvider",
+  { skip: skip || false, timeout: 240000 }, async (t) => {
     const { page, record } = await openPage(browser.context);
-    await page.route((u) => u.pathname === '/layers', async (route) => {
-      const res = await route.fetch();
-      const doc = await res.json();
-      for (const layer of doc.layers) layer.terrain_tileset = `/${layer.name}/terrain/tileset.json`;
-      await route.fulfill({ response: res, json: doc });
-    });
-    await page.goto(`${pages.origin}/?test=1&view=tileset&${pages.query}`, { waitUntil: 'load' });
+    const requests = [];
+    page.on('request', (req) => requests.push(new URL(req.url()).pathname));
+    await page.goto(`${pages.origin}/?test=1&view=terrain-tileset&${pages.query}`, { waitUntil: 'load' });
     await page.evaluate(() => window.tb.ready);
-    const option = await page.$eval('#view option[value="terrain-tileset"]', (o) => ({ hidden: o.hidden, disabled: o.disabled }));
-    assert.deepEqual(option, { hidden: false, disabled: false });
-    await page.evaluate(() => window.tb.waitLoaded(90000));
-    assertClean(record, 'viewer with terrain_tileset');
+    await page.waitForTimeout(2500);
+    await page.evaluate(() => window.tb.waitLoaded(120000));
+    const state = await page.evaluate(() => {
+      const { tb } = window;
+      const provider = tb.viewer.scene.terrainProvider;
+      return {
+        view: tb.view, layer: tb.layer, screen: tb.screen, failed: tb.failed,
+        picker: document.getElementById('view').value,
+        offered: !document.querySelector('#view option[value="terrain-tileset"]').hidden,
+        is3dTiles: provider instanceof Cesium.Cesium3DTilesTerrainProvider,
+        normals: provider.hasVertexNormals,
+      };
+    });
+    t.diagnostic(`3D Tiles terrain: on screen ${JSON.stringify(state.screen)}`);
+    assert.equal(state.layer.terrain_tileset, `/${state.layer.name}/terrain/tileset.json`);
+    assert.ok(state.offered, 'the view picker offers the 3D Tiles terrain');
+    assert.equal(state.view, 'terrain-tileset');
+    assert.equal(state.picker, 'terrain-tileset');
+    assert.ok(state.is3dTiles, "the globe's terrain provider is a Cesium3DTilesTerrainProvider");
+    assert.ok(state.normals, 'vertex normals are used');
+    assert.deepEqual(state.failed, [], 'terrain tile errors');
+    const subtrees = requests.filter((u) => /\/terrain\/[01]\/\d+\/\d+\/\d+\.subtree$/.test(u));
+    const glbs = requests.filter((u) => /\/terrain\/[01]\/\d+\/\d+\/\d+\.glb$/.test(u));
+    assert.ok(subtrees.length > 0, 'subtrees were fetched');
+    assert.ok(glbs.length > 0, '3D Tiles terrain tiles were fetched');
+    assert.equal(requests.filter((u) => u.endsWith('.terrain')).length, 0, 'no quantized-mesh tile');
+    const deepest = Math.max(...glbs.map((u) => Number(u.split('/').at(-3))));
+    t.diagnostic(`${subtrees.length} subtrees, ${glbs.length} glb tiles, deepest level ${deepest}`);
+    assert.ok(deepest >= state.layer.min_zoom, 'tiles meshed from the DEM were loaded');
+    const shot = await saveScreenshot(page, 'viewer-3dtiles-terrain.png');
+    const spread = await lumaSpread(page, shot.png);
+    assert.ok(spread > 8, `the 3D Tiles terrain view is nearly uniform (luma standard deviation ${spread})`);
+    assertClean(record, 'viewer on 3D Tiles terrain');
     await page.close();
   });
