@@ -1057,6 +1057,16 @@ struct HttpServer::Impl {
                    });
     }
 
+    // No tile (the generation queue is full): 503 with Retry-After, and true.
+    static bool busy(const std::shared_ptr<const Blob>& blob, httplib::Response& res) {
+        if (blob) {
+            return false;
+        }
+        res.set_header("Retry-After", std::to_string(kRetryAfterSeconds));
+        send_error(res, 503, "the server is busy generating tiles; retry shortly");
+        return true;
+    }
+
     void serve_dem_tile(const httplib::Request& req, httplib::Response& res) {
         std::int64_t z = 0, x = 0, y = 0;
         if (!parse_index(req.matches[2].str(), 2, z) || !parse_index(req.matches[3].str(), 10, x) ||
@@ -1068,9 +1078,7 @@ struct HttpServer::Impl {
         const tiler::Format encoding = dem_encoding(req);
         const auto blob = tiles.tile(
             req.matches[1].str(), tiler::TileId{static_cast<int>(z), x, y}, encoding, {});
-        if (!blob) {
-            res.set_header("Retry-After", std::to_string(kRetryAfterSeconds));
-            send_error(res, 503, "the server is busy generating tiles; retry shortly");
+        if (busy(blob, res)) {
             return;
         }
         send_blob(req, res, *blob, tiler::media_type(encoding), kTileCacheControl);
@@ -1087,9 +1095,7 @@ struct HttpServer::Impl {
         const unsigned extensions = accepted_extensions(req.get_header_value("Accept"));
         const auto blob = tiles.terrain(
             req.matches[1].str(), tiler::TileId{static_cast<int>(z), x, y}, extensions);
-        if (!blob) {
-            res.set_header("Retry-After", std::to_string(kRetryAfterSeconds));
-            send_error(res, 503, "the server is busy generating tiles; retry shortly");
+        if (busy(blob, res)) {
             return;
         }
         send_blob(req,
@@ -1116,9 +1122,7 @@ struct HttpServer::Impl {
                              std::to_string(tiler::kMaxZoom) + ", and x, y below 2^level");
         }
         const auto blob = tiles.tile(req.matches[1].str(), id, tiler::Format::Terrain3d, {});
-        if (!blob) {
-            res.set_header("Retry-After", std::to_string(kRetryAfterSeconds));
-            send_error(res, 503, "the server is busy generating tiles; retry shortly");
+        if (busy(blob, res)) {
             return;
         }
         send_blob(req,
@@ -1154,9 +1158,7 @@ struct HttpServer::Impl {
             eps.level = static_cast<int>(level);
         }
         const auto blob = tiles.tile(layer, tiler::TileId{static_cast<int>(z), x, y}, format, eps);
-        if (!blob) {
-            res.set_header("Retry-After", std::to_string(kRetryAfterSeconds));
-            send_error(res, 503, "the server is busy generating tiles; retry shortly");
+        if (busy(blob, res)) {
             return;
         }
         // The body is copied (set_content), not streamed with set_content_provider: cpp-httplib

@@ -36,7 +36,10 @@ struct World {
         std::filesystem::create_symlink(dir.path / "outside.txt", dir.path / "web/out.txt");
         std::vector<tb::server::ServedLayer> layers = {
             {tb::tiler::Layer::open(options),
-             {tb::tiler::Format::Glb, tb::tiler::Format::Drc, tb::tiler::Format::Terrain},
+             {tb::tiler::Format::Glb,
+              tb::tiler::Format::Drc,
+              tb::tiler::Format::Terrain,
+              tb::tiler::Format::Terrain3d},
              nullptr}};
         tb::server::TileServiceOptions tile_options;
         tile_options.cache_bytes = 8 << 20;

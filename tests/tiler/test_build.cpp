@@ -221,6 +221,16 @@ std::vector<std::string> tileset_tiles(const fs::path& layer_dir) {
 
 const std::vector<std::string> kSmall = {"--size", "32", "--min-zoom", "7", "--max-zoom", "9"};
 
+// The layer a build with kSmall makes of `dem`, opened in-process.
+std::shared_ptr<const Layer> small_layer(const std::string& dem) {
+    LayerOptions o;
+    o.sources = {dem};
+    o.tile_size = 32;
+    o.min_zoom = 7;
+    o.max_zoom = 9;
+    return Layer::open(o);
+}
+
 std::vector<std::string>
 args(const std::string& dem, const std::string& out, std::vector<std::string> extra = {}) {
     std::vector<std::string> a{"build", dem, "-o", out};
@@ -790,12 +800,7 @@ TEST_CASE("build --formats glb,terrain writes layer.json and every terrain tile 
     const fs::path root = dir.path / "out/terrain";
     REQUIRE(fs::exists(root / "layer.json"));
 
-    LayerOptions o; // as kSmall
-    o.sources = {dem};
-    o.tile_size = 32;
-    o.min_zoom = 7;
-    o.max_zoom = 9;
-    const auto layer = Layer::open(o);
+    const auto layer = small_layer(dem);
     std::string layer_json;
     REQUIRE(layer->document("layer.json", layer_json));
     CHECK(slurp(root / "layer.json") == layer_json);
@@ -873,12 +878,7 @@ TEST_CASE("build --formats terrain3d writes terrain/tileset.json, every subtree 
     const fs::path root = dir.path / "out/terrain/terrain";
     REQUIRE(fs::exists(root / "tileset.json"));
 
-    LayerOptions o; // as kSmall
-    o.sources = {dem};
-    o.tile_size = 32;
-    o.min_zoom = 7;
-    o.max_zoom = 9;
-    const auto layer = Layer::open(o);
+    const auto layer = small_layer(dem);
     std::string tileset;
     REQUIRE(layer->document("terrain/tileset.json", tileset));
     CHECK(slurp(root / "tileset.json") == tileset);

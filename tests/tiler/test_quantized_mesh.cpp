@@ -2,6 +2,7 @@
 // synthetic meshes (32-bit indices, edge lists, header, extensions), and the tiles of a real DEM
 // against GDAL's reading of it plus PROJ's EGM96 (source_oracle.hpp).
 #include "core/error.hpp"
+#include "mountains.hpp"
 #include "qm_reader.hpp"
 #include "source_oracle.hpp"
 #include "tiler/formats/quantized_mesh.hpp"
@@ -56,31 +57,9 @@ std::array<std::uint32_t, 3> canonical(std::uint32_t a, std::uint32_t b, std::ui
     return {a, b, c};
 }
 
-// Checks the horizon occlusion point by its meaning, in the WGS84 scaled space (no vertex
-// below the ellipsoid here), where the ellipsoid is the unit sphere: a camera sees the point P
-// only from within the cone of tangents to the sphere through P, whose contact circle lies at
-// angle acos(1/|P|) from P's direction. A vertex s, at angle a from that direction and with its
-// own horizon at angle acos(1/|s|) around it, is then hidden whenever P is if
-// a + acos(1/|s|) <= acos(1/|P|); the smallest such P meets the bound at some vertex.
+// The header's horizon occlusion point hides every vertex and is the tightest that does.
 void check_horizon(const tb_qm::Tile& t, const std::vector<tb_oracle::V3>& ecef) {
-    const double ra = tb_oracle::kA, rb = tb_oracle::kA * (1 - tb_oracle::kF);
-    const auto& p = t.horizon;
-    const double pm = std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
-    REQUIRE(pm > 1);
-    double tightest = 1e9;
-    for (const auto& e : ecef) {
-        const std::array<double, 3> s{e[0] / ra, e[1] / ra, e[2] / rb};
-        const double sm = std::max(1.0, std::sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]));
-        const double cosang =
-            std::clamp((s[0] * p[0] + s[1] * p[1] + s[2] * p[2]) /
-                           (std::sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]) * pm),
-                       -1.0,
-                       1.0);
-        const double slack = std::acos(1 / pm) - std::acos(1 / sm) - std::acos(cosang);
-        CHECK(slack >= -1e-9);
-        tightest = std::min(tightest, slack);
-    }
-    CHECK(tightest < 1e-6);
+    CHECK(tb_mountains::check_horizon(t.horizon, ecef) < 1e-6);
 }
 
 TEST_CASE("a 301 x 301 vertex mesh encodes with 32-bit indices that decode to its own "
@@ -260,7 +239,7 @@ TEST_CASE("oct-encoded normals decode with CesiumJS's formula within a degree (s
 
 // ---- a real DEM ----
 
-const char* const kMountains = "../shared/data/N44W072.hgt";
+using tb_mountains::kMountains;
 
 std::string metadata_of(const tb_qm::Tile& t) {
     const tb_qm::Extension* e = t.extension(4);
@@ -332,28 +311,8 @@ worst_pixel(const tb_qm::Tile& t, const LonLatBox& b, const std::vector<tb_oracl
     return {worst, judged};
 }
 
-struct Mountains {
-    std::shared_ptr<const tiler::Layer> layer;
-    std::vector<tb_oracle::Pixel> pixels;
-};
-
-// The layer and the GDAL reading of a DEM of ../shared/data, made once; nullptr when absent.
-const Mountains* mountains(const char* path = kMountains) {
-    static std::map<std::string, std::unique_ptr<const Mountains>> made;
-    auto& m = made[path];
-    if (!m && std::filesystem::exists(path)) {
-        log::set_level(log::Level::Warn);
-        auto out = std::make_unique<Mountains>();
-        tiler::LayerOptions o;
-        o.name = "mountains";
-        o.sources = {path};
-        out->layer = tiler::Layer::open(o);
-        const tb_oracle::Geoid geoid;
-        out->pixels = tb_oracle::read_pixels(path, geoid);
-        m = std::move(out);
-    }
-    return m.get();
-}
+using tb_mountains::mountains;
+using tb_mountains::Mountains;
 
 // White Mountains (steep, no voids) and Swiss Alps (steeper, 7 % voids in the steepest parts).
 TEST_CASE("every pixel of a mountain DEM under its finest and coarsest terrain tiles is "

@@ -3,6 +3,7 @@
 // source oracle (GDAL's reading of the DEM plus PROJ's EGM96, the drawn ECEF triangles
 // intersected with the ellipsoid normal through every pixel centre).
 #include "core/error.hpp"
+#include "mountains.hpp"
 #include "source_oracle.hpp"
 #include "terrain3d_reader.hpp"
 #include "tiler/formats/terrain_tiles.hpp"
@@ -21,50 +22,14 @@ using namespace tb;
 using tb::tiler::TileId;
 using tb_terrain3d::json;
 
-const char* const kMountains = "../shared/data/N44W072.hgt";
-
-struct Mountains {
-    std::shared_ptr<const tiler::Layer> layer;
-    std::vector<tb_oracle::Pixel> pixels;
-};
-
-// The layer and GDAL's reading of a DEM of ../shared/data, made once; nullptr when absent.
-const Mountains* mountains(const char* path = kMountains) {
-    static std::map<std::string, std::unique_ptr<const Mountains>> made;
-    auto& m = made[path];
-    if (!m && std::filesystem::exists(path)) {
-        log::set_level(log::Level::Warn);
-        auto out = std::make_unique<Mountains>();
-        tiler::LayerOptions o;
-        o.name = "mountains";
-        o.sources = {path};
-        out->layer = tiler::Layer::open(o);
-        out->pixels = tb_oracle::read_pixels(path, tb_oracle::Geoid{});
-        m = std::move(out);
-    }
-    return m.get();
-}
+using tb_mountains::kMountains;
+using tb_mountains::mountains;
+using tb_mountains::Mountains;
 
 std::string document(const tiler::Layer& layer, const std::string& path) {
     std::string out;
     REQUIRE_MESSAGE(layer.document(path, out), "no document " << path);
     return out;
-}
-
-// Every vertex is hidden whenever the horizon occlusion point is (see test_quantized_mesh.cpp):
-// in the ellipsoid-scaled space, a vertex s at angle a from the point's direction is hidden if
-// a + acos(1/|s|) <= acos(1/|P|).
-void check_horizon(const std::array<double, 3>& p, const std::vector<tb_oracle::V3>& ecef) {
-    const double ra = tb_oracle::kA, rb = tb_oracle::kA * (1 - tb_oracle::kF);
-    const double pm = std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
-    REQUIRE(pm > 1);
-    for (const auto& e : ecef) {
-        const std::array<double, 3> s{e[0] / ra, e[1] / ra, e[2] / rb};
-        const double len = std::sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]);
-        const double cosang =
-            std::clamp((s[0] * p[0] + s[1] * p[1] + s[2] * p[2]) / (len * pm), -1.0, 1.0);
-        CHECK(std::acos(1 / pm) - std::acos(1 / std::max(1.0, len)) - std::acos(cosang) >= -1e-9);
-    }
 }
 
 // White Mountains (steep, no voids) and Swiss Alps (steeper, 7 % voids in the steepest parts).
@@ -242,8 +207,8 @@ TEST_CASE("3D Tiles terrain subtrees list exactly the available tiles, with meta
                         CHECK(std::sqrt(dx * dx + dy * dy + dz * dz) <= sphere[4 * k + 3]);
                     }
                     if (id.z > 0) {
-                        check_horizon({horizon[3 * k], horizon[3 * k + 1], horizon[3 * k + 2]},
-                                      g.drawn.ecef);
+                        tb_mountains::check_horizon(
+                            {horizon[3 * k], horizon[3 * k + 1], horizon[3 * k + 2]}, g.drawn.ecef);
                     }
                     ++checked;
                 }

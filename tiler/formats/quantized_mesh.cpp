@@ -560,26 +560,64 @@ std::array<double, 3> tile_horizon_point(const std::array<double, 3>& centre,
     return horizon;
 }
 
+VertexOrder first_use_order(const QuantizedMesh& q) {
+    const std::size_t n = q.u.size();
+    constexpr std::uint32_t kUnset = ~std::uint32_t{0};
+    VertexOrder out;
+    out.order.assign(n, kUnset);
+    out.old_of.reserve(n);
+    const auto visit = [&out](std::uint32_t i) {
+        if (out.order[i] == kUnset) {
+            out.order[i] = static_cast<std::uint32_t>(out.old_of.size());
+            out.old_of.push_back(i);
+        }
+    };
+    for (std::uint32_t i : q.triangles) {
+        visit(i);
+    }
+    for (std::uint32_t i = 0; i < n; ++i) {
+        visit(i);
+    }
+    return out;
+}
+
+std::array<std::vector<std::uint32_t>, 4> edge_lists(const QuantizedMesh& q,
+                                                     const std::vector<std::uint32_t>& old_of) {
+    std::array<std::vector<std::uint32_t>, 4> edges; // west, south, east, north
+    for (std::uint32_t k = 0; k < old_of.size(); ++k) {
+        const std::uint32_t i = old_of[k];
+        if (q.u[i] == 0) {
+            edges[0].push_back(k);
+        }
+        if (q.v[i] == 0) {
+            edges[1].push_back(k);
+        }
+        if (q.u[i] == kQuantizedMax) {
+            edges[2].push_back(k);
+        }
+        if (q.v[i] == kQuantizedMax) {
+            edges[3].push_back(k);
+        }
+    }
+    for (int s = 0; s < 4; ++s) {
+        auto& list = edges[static_cast<std::size_t>(s)];
+        const bool along_v = s == 0 || s == 2;
+        std::sort(list.begin(), list.end(), [&](std::uint32_t a, std::uint32_t b) {
+            const std::uint32_t ia = old_of[a], ib = old_of[b];
+            return along_v ? std::pair(q.v[ia], a) < std::pair(q.v[ib], b)
+                           : std::pair(q.u[ia], a) < std::pair(q.u[ib], b);
+        });
+    }
+    return edges;
+}
+
 std::string encode_quantized_mesh(const QuantizedMesh& q, const QuantizedMeshExtras& extras) {
     const std::size_t n = q.u.size();
     TB_ASSERT(!q.triangles.empty());
     TB_ASSERT(extras.normals.empty() || extras.normals.size() == n);
     // Vertices in order of first use, so that high-water-mark codes stay small.
-    constexpr std::uint32_t kUnset = ~std::uint32_t{0};
-    std::vector<std::uint32_t> order(n, kUnset), old_of;
-    old_of.reserve(n);
-    for (std::uint32_t i : q.triangles) {
-        if (order[i] == kUnset) {
-            order[i] = static_cast<std::uint32_t>(old_of.size());
-            old_of.push_back(i);
-        }
-    }
-    for (std::uint32_t i = 0; i < n; ++i) {
-        if (order[i] == kUnset) {
-            order[i] = static_cast<std::uint32_t>(old_of.size());
-            old_of.push_back(i);
-        }
-    }
+    const VertexOrder vo = first_use_order(q);
+    const std::vector<std::uint32_t>&order = vo.order, &old_of = vo.old_of;
 
     // Header, from the positions a client decodes.
     std::vector<std::array<double, 3>> ecef(n);
@@ -646,30 +684,7 @@ std::string encode_quantized_mesh(const QuantizedMesh& q, const QuantizedMeshExt
         }
     }
     // Edge lists: west and east along v, south and north along u.
-    std::array<std::vector<std::uint32_t>, 4> edges; // west, south, east, north
-    for (std::uint32_t k = 0; k < n; ++k) {
-        const std::uint32_t i = old_of[k];
-        if (q.u[i] == 0) {
-            edges[0].push_back(k);
-        }
-        if (q.v[i] == 0) {
-            edges[1].push_back(k);
-        }
-        if (q.u[i] == kQuantizedMax) {
-            edges[2].push_back(k);
-        }
-        if (q.v[i] == kQuantizedMax) {
-            edges[3].push_back(k);
-        }
-    }
-    for (int s = 0; s < 4; ++s) {
-        auto& list = edges[static_cast<std::size_t>(s)];
-        const bool along_v = s == 0 || s == 2;
-        std::sort(list.begin(), list.end(), [&](std::uint32_t a, std::uint32_t b) {
-            const std::uint32_t ia = old_of[a], ib = old_of[b];
-            return along_v ? std::pair(q.v[ia], a) < std::pair(q.v[ib], b)
-                           : std::pair(q.u[ia], a) < std::pair(q.u[ib], b);
-        });
+    for (const auto& list : edge_lists(q, old_of)) {
         put_u32(out, static_cast<std::uint32_t>(list.size()));
         for (std::uint32_t k : list) {
             put_index(k);

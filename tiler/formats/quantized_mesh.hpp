@@ -91,6 +91,18 @@ struct QuantizedMeshExtras {
     std::string metadata;                       // JSON text; empty: none
 };
 
+// The vertices of q in order of first use by its triangles (then the unused ones): order[i] is
+// vertex i's new index, old_of[k] the vertex at new index k.
+struct VertexOrder {
+    std::vector<std::uint32_t> order, old_of;
+};
+VertexOrder first_use_order(const QuantizedMesh& q);
+
+// The new indices (of old_of) of the vertices on each side of the tile, west, south, east,
+// north, each sorted along its side.
+std::array<std::vector<std::uint32_t>, 4> edge_lists(const QuantizedMesh& q,
+                                                     const std::vector<std::uint32_t>& old_of);
+
 // The tile's bytes: vertices reordered by first use (as high-water-mark indexing needs), the
 // header computed from the decoded positions (centre of their box, a sphere around them, the
 // horizon occlusion point as CesiumJS's EllipsoidalOccluder computes it, on the ellipsoid

@@ -18,7 +18,6 @@ namespace tb::tiler {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
-constexpr double kDeg = kPi / 180.0;
 constexpr double kQuantSteps = 65535.0; // 16-bit normalized positions
 
 std::string num(double v) {
@@ -450,21 +449,8 @@ std::string encode_terrain_glb(const TerrainTile& tile) {
     const QuantizedPositions pos = quantize_positions(m, tile.exact_positions);
 
     // Vertices in order of first use (meshopt codes such indices compactly).
-    constexpr std::uint32_t kUnset = std::numeric_limits<std::uint32_t>::max();
-    std::vector<std::uint32_t> order(n, kUnset), old_of;
-    old_of.reserve(n);
-    for (std::uint32_t i : m.triangles) {
-        if (order[i] == kUnset) {
-            order[i] = static_cast<std::uint32_t>(old_of.size());
-            old_of.push_back(i);
-        }
-    }
-    for (std::uint32_t i = 0; i < n; ++i) {
-        if (order[i] == kUnset) {
-            order[i] = static_cast<std::uint32_t>(old_of.size());
-            old_of.push_back(i);
-        }
-    }
+    const VertexOrder vo = first_use_order(m);
+    const std::vector<std::uint32_t>&order = vo.order, &old_of = vo.old_of;
 
     std::vector<std::uint16_t> positions;
     std::vector<float> exact;
@@ -515,30 +501,8 @@ std::string encode_terrain_glb(const TerrainTile& tile) {
         indices[k] = order[m.triangles[k]];
     }
     // Edge lists (west, south, east, north), along their side.
-    std::array<std::vector<std::uint32_t>, 4> edges;
-    for (std::uint32_t k = 0; k < n; ++k) {
-        const std::uint32_t i = old_of[k];
-        if (m.u[i] == 0) {
-            edges[0].push_back(k);
-        }
-        if (m.v[i] == 0) {
-            edges[1].push_back(k);
-        }
-        if (m.u[i] == kQuantizedMax) {
-            edges[2].push_back(k);
-        }
-        if (m.v[i] == kQuantizedMax) {
-            edges[3].push_back(k);
-        }
-    }
-    for (int s = 0; s < 4; ++s) {
-        auto& list = edges[static_cast<std::size_t>(s)];
-        const bool along_v = s == 0 || s == 2;
-        std::sort(list.begin(), list.end(), [&](std::uint32_t a, std::uint32_t b) {
-            const std::uint32_t ia = old_of[a], ib = old_of[b];
-            return along_v ? std::pair(m.v[ia], a) < std::pair(m.v[ib], b)
-                           : std::pair(m.u[ia], a) < std::pair(m.u[ib], b);
-        });
+    const std::array<std::vector<std::uint32_t>, 4> edges = edge_lists(m, old_of);
+    for (const auto& list : edges) {
         TB_ASSERT(!list.empty()); // the mesh covers its rectangle, corners included
     }
 
