@@ -45,6 +45,21 @@ inline const Mountains* mountains(const char* path = kMountains) {
     return m.get();
 }
 
+// Calls f(name, m) for White Mountains, then the Swiss Alps (N46E008.tif: steeper, 7 % voids in
+// the steepest parts), each that is present; an absent one is skipped with a message.
+template <typename F> void for_each_mountain(F f) {
+    for (const char* path : {kMountains, "../shared/data/N46E008.tif"}) {
+        const std::string name = path;
+        CAPTURE(name);
+        const Mountains* m = mountains(path);
+        if (!m) {
+            MESSAGE("skipped: " << path << " is absent");
+            continue;
+        }
+        f(name, *m);
+    }
+}
+
 // Checks a horizon occlusion point p by its meaning, in the WGS84 scaled space (the ellipsoid is
 // the unit sphere there): a camera sees p only from within the cone of tangents to the sphere
 // through p, whose contact circle lies at angle acos(1/|p|) from p's direction. A vertex s, at
