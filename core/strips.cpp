@@ -123,7 +123,10 @@ Mesh stitch(const std::vector<Mesh>& meshes, const std::vector<int>& cut, int he
 
 } // namespace
 
-Mesh triangulate_strips(const HeightGrid& grid, const TriangulateOptions& options, int strips) {
+Mesh triangulate_strips(const HeightGrid& grid,
+                        const TriangulateOptions& options,
+                        int strips,
+                        int threads) {
     check_input(grid, options);
     strips = std::min(strips, (grid.width - 1) / (kMinStripColumns - 1));
     if (strips <= 1 || !options.lock_border) {
@@ -140,16 +143,28 @@ Mesh triangulate_strips(const HeightGrid& grid, const TriangulateOptions& option
         parts.push_back(
             columns(grid, cut[static_cast<std::size_t>(k)], cut[static_cast<std::size_t>(k) + 1]));
     }
-    // Strip 0 on this thread, the others on their own; get() rethrows a strip's exception.
-    std::vector<std::future<Mesh>> others;
-    for (std::size_t k = 1; k < parts.size(); ++k) {
-        others.push_back(std::async(
-            std::launch::async, [&parts, &options, k] { return triangulate(parts[k], options); }));
+    // Strip k on thread k % threads, thread 0 being this one; get() rethrows a strip's exception.
+    const std::size_t lanes =
+        threads <= 0 ? parts.size() : std::min(parts.size(), static_cast<std::size_t>(threads));
+    const auto lane = [&parts, &options, lanes](std::size_t first) {
+        std::vector<Mesh> out;
+        for (std::size_t k = first; k < parts.size(); k += lanes) {
+            out.push_back(triangulate(parts[k], options));
+        }
+        return out;
+    };
+    std::vector<std::future<std::vector<Mesh>>> others;
+    for (std::size_t l = 1; l < lanes; ++l) {
+        others.push_back(std::async(std::launch::async, lane, l));
+    }
+    std::vector<std::vector<Mesh>> by_lane;
+    by_lane.push_back(lane(0));
+    for (auto& f : others) {
+        by_lane.push_back(f.get());
     }
     std::vector<Mesh> meshes;
-    meshes.push_back(triangulate(parts[0], options));
-    for (auto& f : others) {
-        meshes.push_back(f.get());
+    for (std::size_t k = 0; k < parts.size(); ++k) {
+        meshes.push_back(std::move(by_lane[k % lanes][k / lanes]));
     }
     Mesh mesh = stitch(meshes, cut, grid.height);
     // Each strip passed triangulate()'s exact check over all its samples, and stitching moves

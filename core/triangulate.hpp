@@ -36,8 +36,13 @@ void check_input(const HeightGrid& grid, const TriangulateOptions& options);
 // (0.1-0.7 % for two strips of a 257 x 257 tile) and divide the wall time by up to `strips`
 // on as many cores. The result depends on grid, options and strips alone, never on thread
 // timing. Meshes the grid whole when options.lock_border is off (the cuts must be locked) or
-// when strips of at least kMinStripColumns columns do not fit.
-Mesh triangulate_strips(const HeightGrid& grid, const TriangulateOptions& options, int strips);
+// when strips of at least kMinStripColumns columns do not fit. `threads` (>= 1) caps the threads
+// used, the calling one included (1: the strips one after the other, on this thread); 0 gives
+// each strip its own. The mesh is the same for any value.
+Mesh triangulate_strips(const HeightGrid& grid,
+                        const TriangulateOptions& options,
+                        int strips,
+                        int threads = 0);
 
 inline constexpr int kMinStripColumns = 33;
 

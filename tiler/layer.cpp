@@ -178,9 +178,9 @@ public:
 
     // What the terrain tileset publishes. Heights: every tile's vertices lie within the
     // layer's range or on the geoid (filler, and the corners covering a rectangle beyond the
-    // DEM), whose undulation stays within kGeoidLowest..kGeoidHighest. Level errors: a tile at a meshed zoom is
-    // held to its zoom's bound (data_terrain measures what its glb draws); a filler tile over
-    // the data is as far from it as the DEM's heights are from the geoid.
+    // DEM), whose undulation stays within kGeoidLowest..kGeoidHighest. Level errors: a tile at a
+    // meshed zoom is held to its zoom's bound (data_terrain measures what its glb draws); a filler
+    // tile over the data is as far from it as the DEM's heights are from the geoid.
     TerrainTilesetSpec terrain_tileset_spec() const {
         TerrainTilesetSpec spec;
         spec.terrain = terrain_spec();
@@ -278,7 +278,7 @@ public:
             if (!drop_voids) {
                 valid = fill_for_terrain(pixel);
             }
-            t.mesh = mesh_pixel_tile(pixel, t.budget, drop_voids);
+            t.mesh = mesh_pixel_tile(pixel, t.budget, drop_voids, options_.mesh_threads);
             t.raster = std::move(pixel.raster);
             if (!drop_voids) {
                 t.raster.grid.valid.swap(valid);
@@ -287,11 +287,13 @@ public:
         }
         t.raster = make_raster(id);
         if (drop_voids) {
-            t.mesh = to_tile_mesh(t.raster, mesh_tile(t.raster, t.budget), true);
+            t.mesh =
+                to_tile_mesh(t.raster, mesh_tile(t.raster, t.budget, options_.mesh_threads), true);
         } else {
             TileRaster filled = t.raster;
             filled.grid.valid.clear();
-            t.mesh = to_tile_mesh(filled, mesh_tile(filled, t.budget), false);
+            t.mesh =
+                to_tile_mesh(filled, mesh_tile(filled, t.budget, options_.mesh_threads), false);
         }
         // Every valid source pixel under the tile, as the drawn tile must hold it.
         for (const SourcePixel& p : source_->pixels_in(t.raster.bounds)) {
@@ -651,6 +653,10 @@ private:
             throw InputError("layer name '" + o.name +
                              "': use letters, digits, '_' and '-' only (it goes into URLs)");
         }
+        if (o.mesh_threads < 1 || o.mesh_threads > 64) {
+            throw InputError("layer '" + o.name + "': " + std::to_string(o.mesh_threads) +
+                             " threads per tile is outside 1..64");
+        }
         if (o.tile_size < 2 || o.tile_size > 4096) {
             throw InputError("layer '" + o.name + "': tile size " + std::to_string(o.tile_size) +
                              " is outside 2..4096 samples");
@@ -928,12 +934,15 @@ void check_eps(double eps, const std::string& what) {
     }
 }
 
-core::Mesh mesh_tile(const TileRaster& raster, const ErrorBudget& budget) {
+core::Mesh mesh_tile(const TileRaster& raster, const ErrorBudget& budget, int threads) {
     // Two strips on two threads: a tile requested cold is ready in about 60 % of the time for
     // 0.1-0.7 % more triangles (the cut column is a locked border, as between two tiles).
     constexpr int kStrips = 2;
     return core::triangulate_strips(
-        raster.grid, core::TriangulateOptions{budget.mesh_eps, true, budget.max_edge}, kStrips);
+        raster.grid,
+        core::TriangulateOptions{budget.mesh_eps, true, budget.max_edge},
+        kStrips,
+        threads);
 }
 
 std::string mesh_to_obj(const core::Mesh& mesh) {

@@ -45,6 +45,9 @@ struct LayerOptions {
     int dem_tile_size = 512; // raster DEM tiles: pixels per side, 256 or 512
     DemHeights dem_heights = DemHeights::SeaLevel;
     std::optional<double> nodata; // raw nodata value replacing the sources' own (--nodata)
+    // Threads meshing one tile (its two strips): 2 for a server's cold tiles, 1 where tiles are
+    // made side by side (build workers). The bytes are the same for any value.
+    int mesh_threads = 2;
 };
 
 // How a layer makes its published error true at every valid pixel of the source.
@@ -137,8 +140,8 @@ void check_eps(double eps, const std::string& what);
 
 // The tile mesh exactly as encoded: core::triangulate_strips(raster.grid, ..., 2) at
 // budget.mesh_eps with locked borders and budget.max_edge (see tile_error_budget): two strips
-// meshed on two threads, stitched along a locked middle column.
-core::Mesh mesh_tile(const TileRaster& raster, const ErrorBudget& budget);
+// meshed on up to `threads` threads, stitched along a locked middle column.
+core::Mesh mesh_tile(const TileRaster& raster, const ErrorBudget& budget, int threads = 2);
 
 // A mesh in grid coordinates as text: OBJ ("v column row height", 1-based "f i j k") or JSON
 // ({"vertices":[x,y,z,...],"triangles":[i,j,k,...]}, 0-based), heights as the float the mesher

@@ -85,6 +85,23 @@ TEST_CASE("strips stay within eps, tile the grid and repeat bit for bit (seed 5)
     }
 }
 
+TEST_CASE("the strips' mesh is the same on one thread, two, or one per strip (seed 6)") {
+    for (const char* kind : {"ridge", "spikes", "noise"}) {
+        const HeightGrid g = terrain::named(kind, 129, 100, 6);
+        const TriangulateOptions opt{.eps = 1.0, .lock_border = true};
+        for (int strips : {2, 3}) {
+            INFO(kind, " strips=", strips);
+            const Mesh all = tb::core::triangulate_strips(g, opt, strips, 0);
+            REQUIRE(!all.triangles.empty());
+            for (int threads : {1, 2}) {
+                const Mesh m = tb::core::triangulate_strips(g, opt, strips, threads);
+                CHECK(m.points == all.points);
+                CHECK(m.triangles == all.triangles);
+            }
+        }
+    }
+}
+
 TEST_CASE("strips honour max_edge and nodata, including a strip that is all nodata") {
     HeightGrid g = terrain::named("noise", 129, 97, 3);
     g.valid.assign(g.heights.size(), 1);

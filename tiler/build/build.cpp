@@ -782,7 +782,11 @@ std::string to_json(const BuildSummary& s) {
 BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop) {
     const auto start = Clock::now();
     check_options(o);
-    const auto layer = Layer::open(o.layer);
+    // The workers make tiles side by side, so each meshes its tile on its own thread: --threads
+    // N then uses N cores.
+    LayerOptions layer_options = o.layer;
+    layer_options.mesh_threads = 1;
+    const auto layer = Layer::open(layer_options);
     const std::string& name = o.layer.name;
     auto store = TileStore::open(o.output);
     const std::string where = o.output + " (layer " + name + ")";

@@ -67,7 +67,11 @@ ErrorBudget pixel_error_budget(double eps, Scheme scheme, const PixelGrid& pixel
 // budget.mesh_eps of it; triangles holding no valid pixel, and strip triangles touching a border
 // vertex with no data beside it, are left out (with drop_voids; without, every triangle is kept
 // and voids are drawn at their filled heights, as a globe that must cover the tile needs);
-// every edge is at most budget.max_edge pixels.
-TileMesh mesh_pixel_tile(const PixelTile& tile, const ErrorBudget& budget, bool drop_voids = true);
+// every edge is at most budget.max_edge pixels. `threads` caps the threads meshing the block's
+// strips (the mesh is the same for any value).
+TileMesh mesh_pixel_tile(const PixelTile& tile,
+                         const ErrorBudget& budget,
+                         bool drop_voids = true,
+                         int threads = 2);
 
 } // namespace tb::tiler
