@@ -24,7 +24,9 @@ std::uint32_t read_u32(std::string_view bytes, std::size_t at) {
 
 // The number following `"key":` after position `from` in the JSON text.
 double json_number_after(std::string_view json, std::string_view key, std::size_t from = 0) {
-    const std::string pattern = "\"" + std::string(key) + "\":";
+    std::string pattern(1, '"'); // built up, not "a" + b: GCC 12 -O3 warns (-Wrestrict) on that
+    pattern += key;
+    pattern += "\":";
     const std::size_t at = json.find(pattern, from);
     if (at == std::string_view::npos) {
         throw InputError("glb: JSON has no \"" + std::string(key) +

@@ -502,9 +502,8 @@ std::string encode_terrain_glb(const TerrainTile& tile) {
     }
     // Edge lists (west, south, east, north), along their side.
     const std::array<std::vector<std::uint32_t>, 4> edges = edge_lists(m, old_of);
-    for (const auto& list : edges) {
-        TB_ASSERT(!list.empty()); // the mesh covers its rectangle, corners included
-    }
+    // The mesh covers its rectangle, corners included, so no side is empty.
+    TB_ASSERT(std::none_of(edges.begin(), edges.end(), [](const auto& l) { return l.empty(); }));
 
     // The BIN chunk holds the compressed streams and the plain normals; the uncompressed
     // streams live in a fallback buffer with no data, as EXT_meshopt_compression allows.
@@ -588,7 +587,12 @@ std::string encode_terrain_glb(const TerrainTile& tile) {
 
     const std::string index_type = wide ? "5125" : "5123";
     const auto vec = [](const std::array<double, 3>& v) {
-        return "[" + num(v[0]) + "," + num(v[1]) + "," + num(v[2]) + "]";
+        std::string out(1, '[');
+        for (std::size_t k = 0; k < 3; ++k) {
+            out += num(v[k]);
+            out += k < 2 ? ',' : ']';
+        }
+        return out;
     };
     std::size_t accessor_count = 0;
     const auto add_accessor = [&](const std::string& body) {
@@ -632,11 +636,11 @@ std::string encode_terrain_glb(const TerrainTile& tile) {
         }
     }
     matrix[12] = corner.x, matrix[13] = corner.z, matrix[14] = -corner.y, matrix[15] = 1;
-    std::string matrix_json = "[";
+    std::string matrix_json(1, '[');
     for (std::size_t k = 0; k < 16; ++k) {
-        matrix_json += (k ? "," : "") + num(matrix[k]);
+        matrix_json += num(matrix[k]);
+        matrix_json += k < 15 ? ',' : ']';
     }
-    matrix_json += "]";
 
     std::string json =
         "{\"asset\":{\"version\":\"2.0\",\"generator\":\"Terrabound\",\"extras\":{"
