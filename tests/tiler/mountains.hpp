@@ -53,7 +53,7 @@ template <typename F> void for_each_mountain(F f) {
         CAPTURE(name);
         const Mountains* m = mountains(path);
         if (!m) {
-            MESSAGE("skipped: " << path << " is absent");
+            MESSAGE("skipped: " << std::string(path) << " is absent");
             continue;
         }
         f(name, *m);

@@ -535,7 +535,7 @@ TEST_CASE("a build that fills the disk fails with exit 3, and --resume finishes 
 TEST_CASE("build makes a decodable pyramid of a real DEM with nodata (elev.tif)") {
     const std::string dem = std::string(TB_SHARED_DATA) + "/elev.tif";
     if (!fs::exists(dem)) {
-        MESSAGE("skipped: " << dem << " is missing");
+        MESSAGE("skipped: " << std::string(dem) << " is missing");
         return;
     }
     BuildDir dir;

@@ -407,7 +407,7 @@ TEST_CASE("a real SRTM window (N44W072.hgt, Mt Washington) stays within eps afte
     const std::string path = std::string(TB_SHARED_DATA) + "/N44W072.hgt";
     std::ifstream in(path, std::ios::binary);
     if (!in) {
-        MESSAGE("skipped: " << path << " is missing");
+        MESSAGE("skipped: " << std::string(path) << " is missing");
         return;
     }
     std::string raw((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
@@ -458,7 +458,7 @@ TEST_CASE(
     "real DEM tiles made by the layer stay within eps after decoding (S33W071.tif, Aconcagua)") {
     const std::string path = std::string(TB_SHARED_DATA) + "/S33W071.tif";
     if (!std::ifstream(path)) {
-        MESSAGE("skipped: " << path << " is missing");
+        MESSAGE("skipped: " << std::string(path) << " is missing");
         return;
     }
     for (Scheme scheme : {Scheme::Geodetic, Scheme::Mercator}) {

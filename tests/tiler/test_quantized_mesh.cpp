@@ -341,9 +341,8 @@ TEST_CASE("every pixel of a mountain DEM under its finest and coarsest terrain t
                     judged += count;
                 }
             }
-            MESSAGE(name
-                    << " zoom " << z << ": " << judged << " pixels, worst error " << worst
-                    << " of the published eps " << layer.eps_for_zoom(z) << " m");
+            MESSAGE(name << " zoom " << z << ": " << judged << " pixels, worst error " << worst
+                         << " of the published eps " << layer.eps_for_zoom(z) << " m");
             CHECK(judged > 0);
         }
     });
@@ -353,14 +352,8 @@ TEST_CASE("every pixel of a mountain DEM under its finest and coarsest terrain t
 // past the data and are joined to their corners), of a DEM without voids and of one with voids
 // crossing tile borders.
 TEST_CASE("neighbouring terrain tiles share their border vertices, heights and normals") {
-    for (const char* path : {kMountains, "../shared/data/N46E008.tif"}) {
-        const std::string name = path;
-        CAPTURE(name);
-        const Mountains* m = mountains(path);
-        if (!m) {
-            MESSAGE("skipped: " << name << " is absent");
-            continue;
-        }
+    tb_mountains::for_each_mountain([&](const std::string& name, const Mountains& mountain) {
+        const Mountains* m = &mountain;
         const tiler::Layer& layer = *m->layer;
         const int z = layer.max_zoom();
         const tiler::TileRange r = layer.tiles_at(z);
@@ -421,14 +414,14 @@ TEST_CASE("neighbouring terrain tiles share their border vertices, heights and n
         }
         MESSAGE(name << ": " << pairs << " neighbour pairs share " << shared << " border vertices");
         CHECK(pairs >= 4);
-    }
+    });
 }
 
 TEST_CASE("terrain tiles: sea-level filler at zoom 0, nothing beyond max zoom, 400 outside "
           "the scheme") {
     const Mountains* m = mountains();
     if (!m) {
-        MESSAGE("skipped: " << kMountains << " is absent");
+        MESSAGE("skipped: " << std::string(kMountains) << " is absent");
         return;
     }
     const tiler::Layer& layer = *m->layer;

@@ -199,7 +199,8 @@ TEST_CASE("EGM96 undulation matches NGA's published test values") {
         {-0.4667440, 0.0023000, 17.329},
     };
     if (!std::filesystem::exists(kEgm96GridPath)) {
-        MESSAGE("skipped: " << kEgm96GridPath << " is missing (Debian package proj-data)");
+        MESSAGE("skipped: " << std::string(kEgm96GridPath)
+                            << " is missing (Debian package proj-data)");
         return;
     }
     for (const auto& p : points) {

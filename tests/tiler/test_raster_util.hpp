@@ -40,7 +40,7 @@ struct ScratchDir {
 inline std::optional<std::string> shared_dem(const std::string& name) {
     const std::string path = std::string(TB_SHARED_DATA) + "/" + name;
     if (!fs::exists(path)) {
-        MESSAGE("skipped: " << path << " is missing");
+        MESSAGE("skipped: " << std::string(path) << " is missing");
         return std::nullopt;
     }
     return path;

@@ -113,7 +113,7 @@ TEST_CASE("3D Tiles terrain subtrees list exactly the available tiles, with meta
           "each tile's vertices") {
     const Mountains* m = mountains();
     if (!m) {
-        MESSAGE("skipped: " << kMountains << " is absent");
+        MESSAGE("skipped: " << std::string(kMountains) << " is absent");
         return;
     }
     const tiler::Layer& layer = *m->layer;
@@ -237,7 +237,7 @@ TEST_CASE("3D Tiles terrain: unknown subtrees and tiles outside the scheme or be
           "are refused") {
     const Mountains* m = mountains();
     if (!m) {
-        MESSAGE("skipped: " << kMountains << " is absent");
+        MESSAGE("skipped: " << std::string(kMountains) << " is absent");
         return;
     }
     const tiler::Layer& layer = *m->layer;
