@@ -151,6 +151,28 @@ std::string loggable(const httplib::Request& req) {
 }
 
 // A decimal digit string of at most `max_digits` digits, as a number.
+// A non-empty comma-separated list of HTTP tokens (header names), optional spaces around commas.
+bool is_token_list(std::string_view text) {
+    const auto tchar = [](char c) {
+        return std::isalnum(static_cast<unsigned char>(c)) ||
+               std::string_view("!#$%&'*+-.^_`|~").find(c) != std::string_view::npos;
+    };
+    bool any = false, in_token = false, after_token = false;
+    for (char c : text) {
+        if (tchar(c) && !after_token) {
+            in_token = any = true;
+        } else if (c == ' ' || c == '\t') {
+            after_token = after_token || in_token;
+            in_token = false;
+        } else if (c == ',' && (in_token || after_token)) {
+            in_token = after_token = false;
+        } else {
+            return false;
+        }
+    }
+    return any && (in_token || after_token);
+}
+
 bool parse_index(const std::string& text, std::size_t max_digits, std::int64_t& out) {
     if (text.empty() || text.size() > max_digits) {
         return false;
@@ -937,8 +959,11 @@ struct HttpServer::Impl {
             t_request.route = "preflight";
             res.status = 204;
             res.set_header("Access-Control-Allow-Methods", "GET, HEAD, OPTIONS");
+            // The header names asked for are allowed, echoed only when they are a list of
+            // header-name tokens (RFC 9110); anything else gets "*" rather than its text back.
             const std::string asked = req.get_header_value("Access-Control-Request-Headers");
-            res.set_header("Access-Control-Allow-Headers", asked.empty() ? "*" : asked);
+            res.set_header("Access-Control-Allow-Headers",
+                           is_token_list(asked) ? asked : std::string("*"));
             res.set_header("Access-Control-Max-Age", "86400");
             res.set_header("Allow", "GET, HEAD, OPTIONS");
         });
