@@ -205,7 +205,7 @@ public:
                                  "': globe terrain tiles have only their zoom's eps "
                                  "(CesiumJS picks levels itself); drop ?eps");
             }
-            TerrainTile tile = terrain_tile(id);
+            TerrainTile tile = terrain_tile(id, format);
             if (format == Format::Terrain) {
                 return encode_quantized_mesh(tile.mesh, tile.extras);
             }
@@ -419,8 +419,8 @@ private:
     // A globe terrain tile's content (tiler/formats/terrain_tiles.hpp), encoded as
     // quantized-mesh or 3D Tiles terrain: meshed from the DEM where the layer has data, flat
     // filler on the geoid elsewhere at zooms up to max_zoom (CesiumJS never asks for a tile whose
-    // parent is missing).
-    TerrainTile terrain_tile(const TileId& id) const {
+    // parent is missing). Only what `format` (terrain or terrain3d) encodes is measured and made.
+    TerrainTile terrain_tile(const TileId& id, Format format) const {
         if (options_.scheme != Scheme::Geodetic) {
             throw InputError("layer '" + options_.name +
                              "': globe terrain needs the geodetic scheme");
@@ -438,7 +438,7 @@ private:
         const LonLatBox bounds = tile_bounds(options_.scheme, id);
         if (may_have_tile(id)) {
             try {
-                return data_terrain(id, spec, bounds);
+                return data_terrain(id, spec, bounds, format);
             } catch (const NotFound&) {
                 // no source pixel centre lies in the tile: filler
             }
@@ -459,8 +459,10 @@ private:
         return tile;
     }
 
-    TerrainTile
-    data_terrain(const TileId& id, const TerrainSpec& spec, const LonLatBox& bounds) const {
+    TerrainTile data_terrain(const TileId& id,
+                             const TerrainSpec& spec,
+                             const LonLatBox& bounds,
+                             Format format) const {
         // The 15-bit quantization moves vertices by up to half a step (about 1/65534 of the
         // tile) across the slope: it is measured at every sample, and where it takes the tile
         // past its bound the worst samples become vertices (quantize_within). The border lines
@@ -479,32 +481,33 @@ private:
         double error = 0;
         tile.mesh = quantize_within(
             t.mesh, bounds, t.raster, t.source_pixels, target - t.budget.sag, error, &uncovered);
-        double glb_error =
-            surface_error(terrain_glb_surface(tile.mesh, false), t.raster, t.source_pixels);
-        if (glb_error + t.budget.sag > target) {
-            tile.exact_positions = true;
-            glb_error =
-                surface_error(terrain_glb_surface(tile.mesh, true), t.raster, t.source_pixels);
-        }
         if (uncovered > 0) {
             log::debug("tile " + tile_name(id) + ": " + std::to_string(uncovered) +
                        " sample(s) lie in no quantized triangle");
         }
-        const double published = std::max(error + t.budget.sag, target);
-        tile.glb_error = std::max(glb_error + t.budget.sag, target);
-        if (std::max(published, tile.glb_error) > target + 1e-9) {
-            log::warn("terrain tile " + tile_name(id) + ": quantization leaves it " +
-                      std::to_string(error + t.budget.sag) + " m (quantized-mesh) and " +
-                      std::to_string(glb_error + t.budget.sag) +
-                      " m (3D Tiles) from the DEM, above the zoom's bound " +
-                      std::to_string(target) + " m; the tile itself publishes the larger bound");
+        tile.error = std::max(error + t.budget.sag, target);
+        double drawn = error; // what the encoded format draws, measured at every sample
+        if (format == Format::Terrain3d) {
+            drawn = surface_error(terrain_glb_surface(tile.mesh, false), t.raster, t.source_pixels);
+            if (drawn + t.budget.sag > target) {
+                tile.exact_positions = true;
+                drawn =
+                    surface_error(terrain_glb_surface(tile.mesh, true), t.raster, t.source_pixels);
+            }
+            tile.glb_error = std::max(drawn + t.budget.sag, target);
+        } else {
+            tile.extras.water_mask = terrain_water_mask(t.raster, bounds);
+            tile.extras.metadata = terrain_metadata(spec, id, tile.error, false);
+        }
+        if (drawn + t.budget.sag > target + 1e-9) {
+            log::warn(std::string("terrain tile ") + tile_name(id) + "." + extension(format) +
+                      ": quantization leaves it " + std::to_string(drawn + t.budget.sag) +
+                      " m from the DEM, above the zoom's bound " + std::to_string(target) +
+                      " m; the tile itself publishes the larger bound");
             std::lock_guard lock(measured_mutex_);
             ++over_eps_;
         }
-        tile.error = published;
         tile.extras.normals = vertex_normals(t, id);
-        tile.extras.water_mask = terrain_water_mask(t.raster, bounds);
-        tile.extras.metadata = terrain_metadata(spec, id, published, false);
         return tile;
     }
 

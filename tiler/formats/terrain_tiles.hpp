@@ -25,7 +25,9 @@
 
 namespace tb::tiler {
 
-// A terrain tile's content, made once and encoded as quantized-mesh or as 3D Tiles terrain.
+// A terrain tile's content, encoded as quantized-mesh or as 3D Tiles terrain. The mesh is the
+// same for both; what only one format carries (the water mask and metadata of quantized-mesh,
+// the measured glb bound of 3D Tiles) is made for the format asked for.
 struct TerrainTile {
     QuantizedMesh mesh;         // covers the whole tile rectangle
     QuantizedMeshExtras extras; // normals (one per vertex), water mask, metadata JSON
