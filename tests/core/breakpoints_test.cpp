@@ -165,3 +165,95 @@ TEST_CASE("anchor points on each border are exactly that border's optimal fit (s
         CHECK(border(side) == tb::core::border_breakpoints(g, 1.0, side));
     }
 }
+
+namespace {
+
+std::vector<float> column_of(const tb::core::HeightGrid& g, int x) {
+    std::vector<float> z;
+    for (int y = 0; y < g.height; ++y) {
+        z.push_back(g.at(x, y));
+    }
+    return z;
+}
+
+std::vector<float> row_of(const tb::core::HeightGrid& g, int y) {
+    std::vector<float> z;
+    for (int x = 0; x < g.width; ++x) {
+        z.push_back(g.at(x, y));
+    }
+    return z;
+}
+
+bool raster_before(tb::core::GridPoint a, tb::core::GridPoint b) {
+    return a.y != b.y ? a.y < b.y : a.x < b.x;
+}
+
+// The anchors of the paper (§3.1), rebuilt from the 1-D fits: the four borders, the vertical
+// scan lines through the horizontal border with fewer breakpoints (top on ties) and the
+// horizontal ones through the vertical border with fewer (left on ties).
+std::vector<tb::core::GridPoint> paper_anchors(const tb::core::HeightGrid& g, double eps) {
+    using tb::core::border_breakpoints;
+    const std::vector<std::uint8_t> all;
+    const auto top = border_breakpoints(g, eps, 0), bottom = border_breakpoints(g, eps, 1);
+    const auto left = border_breakpoints(g, eps, 2), right = border_breakpoints(g, eps, 3);
+    std::vector<tb::core::GridPoint> pts;
+    for (int x : top) pts.push_back({x, 0});
+    for (int x : bottom) pts.push_back({x, g.height - 1});
+    for (int y : left) pts.push_back({0, y});
+    for (int y : right) pts.push_back({g.width - 1, y});
+    const auto& cols = bottom.size() < top.size() ? bottom : top;
+    for (std::size_t i = 1; i + 1 < cols.size(); ++i) {
+        const auto ys = tb::core::fit_breakpoints(column_of(g, cols[i]), all, eps);
+        for (std::size_t k = 1; k + 1 < ys.size(); ++k) pts.push_back({cols[i], ys[k]});
+    }
+    const auto& rows = right.size() < left.size() ? right : left;
+    for (std::size_t i = 1; i + 1 < rows.size(); ++i) {
+        const auto xs = tb::core::fit_breakpoints(row_of(g, rows[i]), all, eps);
+        for (std::size_t k = 1; k + 1 < xs.size(); ++k) pts.push_back({xs[k], rows[i]});
+    }
+    std::sort(pts.begin(), pts.end(), raster_before);
+    pts.erase(std::unique(pts.begin(), pts.end()), pts.end());
+    return pts;
+}
+
+} // namespace
+
+TEST_CASE("anchor points are the paper's when they are many, and denser scan lines add "
+          "1-D optimal breakpoints when they are few") {
+    const std::vector<std::uint8_t> all;
+    // Fine eps on rough noise: the paper's anchors are well over 1% of the 30,000 samples.
+    {
+        const auto g = terrain::noise(200, 150, 3, 60.0, 4.0);
+        const auto paper = paper_anchors(g, 0.5);
+        REQUIRE(paper.size() > 300);
+        CHECK(tb::core::anchor_points(g, 0.5) == paper);
+    }
+    // Coarse eps on smooth noise: few anchors, so more scan lines are fitted.
+    {
+        const auto g = terrain::noise(200, 150, 3, 60.0, 0.5);
+        const double eps = 6.0;
+        const auto paper = paper_anchors(g, eps);
+        const auto pts = tb::core::anchor_points(g, eps);
+        INFO("paper ", paper.size(), " anchors, got ", pts.size());
+        REQUIRE(paper.size() < 300);
+        CHECK(std::is_sorted(pts.begin(), pts.end(), raster_before));
+        CHECK(std::includes(pts.begin(), pts.end(), paper.begin(), paper.end(), raster_before));
+        CHECK(pts.size() > paper.size());
+        // Every extra anchor is an interior breakpoint of its own column's or row's optimal fit,
+        // and none is on a border (the borders stay exactly their fits).
+        for (const auto& p : pts) {
+            if (std::binary_search(paper.begin(), paper.end(), p, raster_before)) {
+                continue;
+            }
+            INFO("x=", p.x, " y=", p.y);
+            CHECK(p.x > 0);
+            CHECK(p.y > 0);
+            CHECK(p.x < g.width - 1);
+            CHECK(p.y < g.height - 1);
+            const auto ys = tb::core::fit_breakpoints(column_of(g, p.x), all, eps);
+            const auto xs = tb::core::fit_breakpoints(row_of(g, p.y), all, eps);
+            CHECK((std::binary_search(ys.begin(), ys.end(), p.y) ||
+                   std::binary_search(xs.begin(), xs.end(), p.x)));
+        }
+    }
+}
