@@ -8,7 +8,6 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <functional>
 
 #include "core/error.hpp"
 #include "core/polygon_dp.hpp"
@@ -243,7 +242,7 @@ bool Refiner::try_remove(Index v, std::vector<Index>& ring) {
         if (attempt == kMaxAttempts) {
             return false;
         }
-        tris = triangulate_polygon(pts, std::ref(cost), nullptr, &scratch_.dp, &pv);
+        tris = triangulate_polygon(pts, cost, nullptr, &scratch_.dp, &pv);
         if (!tris) {
             return false;
         }
@@ -365,11 +364,20 @@ std::size_t Refiner::merge_pass() {
     };
     std::vector<Index> ring;
     if (sweep) {
-        for (Index t = 0; t < tin_.triangle_slots(); ++t) {
+        // Two sweeps: the mean normals, then the deviations. The normals and their lengths are
+        // kept from the first (they cost three height lookups each), the mean normals' lengths
+        // computed once per vertex; the same operations as deviation_of, so the same bits.
+        const Index slots = tin_.triangle_slots();
+        std::vector<std::array<double, 4>> normals(slots); // normal, length
+        for (Index t = 0; t < slots; ++t) {
             if (!tin_.alive(t)) {
                 continue;
             }
             const auto nrm = normal(t);
+            normals[t] = {nrm[0],
+                          nrm[1],
+                          nrm[2],
+                          std::sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2])};
             for (Index e = 3 * t; e < 3 * t + 3; ++e) {
                 const Index v = tin_.triangles[e];
                 for (std::size_t k = 0; k < 3; ++k) {
@@ -378,14 +386,22 @@ std::size_t Refiner::merge_pass() {
                 error_points[v] += stats_[t].error_points;
             }
         }
-        for (Index t = 0; t < tin_.triangle_slots(); ++t) {
+        std::vector<double> mean_len(nv);
+        for (Index v = 0; v < nv; ++v) {
+            const auto& m = mean[v];
+            mean_len[v] = std::sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]);
+        }
+        for (Index t = 0; t < slots; ++t) {
             if (!tin_.alive(t)) {
                 continue;
             }
-            const auto nrm = normal(t);
+            const auto& nrm = normals[t];
             for (Index e = 3 * t; e < 3 * t + 3; ++e) {
                 const Index v = tin_.triangles[e];
-                deviation[v] = std::max(deviation[v], deviation_of(nrm, mean[v]));
+                const auto& m = mean[v];
+                const double d =
+                    1.0 - (nrm[0] * m[0] + nrm[1] * m[1] + nrm[2] * m[2]) / (nrm[3] * mean_len[v]);
+                deviation[v] = std::max(deviation[v], d);
             }
         }
     } else {

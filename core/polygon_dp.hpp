@@ -3,12 +3,12 @@
 // dynamic program over valid diagonals).
 #include <array>
 #include <cstdint>
-#include <functional>
 #include <optional>
 #include <span>
 #include <vector>
 
 #include "core/mesh.hpp"
+#include "core/predicates.hpp"
 
 namespace tb::core {
 
@@ -46,16 +46,103 @@ struct PolygonDpScratch {
 
 // Minimum-cost triangulation of the simple counter-clockwise polygon v (n >= 3), where
 // cost(i, j, k) for i < j < k is the cost of the triangle (v[i], v[j], v[k]) or nullopt when
-// that triangle may not be used. Only valid diagonals are used and every triangle has positive
-// area. Returns the triangles as index triples (counter-clockwise), or nullopt when no allowed
+// that triangle may not be used (any callable (int, int, int) -> std::optional<TriangleCost>).
+// Only valid diagonals are used and every triangle has positive area. Returns the triangles as index triples (counter-clockwise), or nullopt when no allowed
 // triangulation exists. Ties go to the lowest apex index. O(n^3) cost calls at most (each
 // triple once). With star_center the polygon must be star-shaped around it as
 // valid_diagonal_star requires, and that faster test is used.
+template <typename Cost>
 std::optional<std::vector<std::array<int, 3>>>
 triangulate_polygon(std::span<const GridPoint> v,
-                    const std::function<std::optional<TriangleCost>(int, int, int)>& cost,
+                    const Cost& cost,
                     TriangleCost* total = nullptr,
                     PolygonDpScratch* scratch = nullptr,
                     const GridPoint* star_center = nullptr);
+
+// ---- implementation (a template: the cost is inlined into the program's inner loop) ----
+
+template <typename Cost>
+std::optional<std::vector<std::array<int, 3>>>
+triangulate_polygon(std::span<const GridPoint> v,
+                    const Cost& cost,
+                    TriangleCost* total,
+                    PolygonDpScratch* scratch,
+                    const GridPoint* star_center) {
+    const int n = static_cast<int>(v.size());
+    if (n < 3) {
+        return std::nullopt;
+    }
+    const auto idx = [n](int i, int k) { return static_cast<std::size_t>(i * n + k); };
+    // side[i][k]: v_i v_k may be a side of a sub-polygon (a polygon edge or a valid diagonal).
+    PolygonDpScratch local;
+    PolygonDpScratch& mem = scratch != nullptr ? *scratch : local;
+    auto& side = mem.side;
+    side.assign(static_cast<std::size_t>(n * n), 0);
+    for (int i = 0; i < n; ++i) {
+        for (int k = i + 1; k < n; ++k) {
+            const bool edge = k == i + 1 || (i == 0 && k == n - 1);
+            const bool inside = star_center != nullptr ? valid_diagonal_star(v, *star_center, i, k)
+                                                       : valid_diagonal(v, i, k);
+            side[idx(i, k)] = edge || inside ? 1 : 0;
+        }
+    }
+    auto& best = mem.best;
+    best.assign(static_cast<std::size_t>(n * n), std::nullopt);
+    auto& apex = mem.apex;
+    apex.assign(static_cast<std::size_t>(n * n), -1);
+    for (int i = 0; i + 1 < n; ++i) {
+        best[idx(i, i + 1)] = TriangleCost{};
+    }
+    for (int len = 2; len < n; ++len) {
+        for (int i = 0; i + len < n; ++i) {
+            const int k = i + len;
+            if (!side[idx(i, k)]) {
+                continue;
+            }
+            for (int j = i + 1; j < k; ++j) {
+                const auto& left = best[idx(i, j)];
+                const auto& right = best[idx(j, k)];
+                if (!left || !right) {
+                    continue;
+                }
+                if (orient2d(v[static_cast<std::size_t>(i)],
+                             v[static_cast<std::size_t>(j)],
+                             v[static_cast<std::size_t>(k)]) <= 0) {
+                    continue;
+                }
+                const auto c = cost(i, j, k);
+                if (!c) {
+                    continue;
+                }
+                const TriangleCost sum = *left + *right + *c;
+                auto& cell = best[idx(i, k)];
+                if (!cell || sum < *cell) {
+                    cell = sum;
+                    apex[idx(i, k)] = j;
+                }
+            }
+        }
+    }
+    if (!best[idx(0, n - 1)]) {
+        return std::nullopt;
+    }
+    if (total != nullptr) {
+        *total = *best[idx(0, n - 1)];
+    }
+    std::vector<std::array<int, 3>> out;
+    std::vector<std::array<int, 2>> todo{{0, n - 1}};
+    while (!todo.empty()) {
+        const auto [i, k] = todo.back();
+        todo.pop_back();
+        if (k - i < 2) {
+            continue;
+        }
+        const int j = apex[idx(i, k)];
+        out.push_back({i, j, k});
+        todo.push_back({i, j});
+        todo.push_back({j, k});
+    }
+    return out;
+}
 
 } // namespace tb::core

@@ -9,6 +9,7 @@
 
 #include "core/error_scan.hpp"
 #include "core/polygon_dp.hpp"
+#include "core/split_queue.hpp"
 #include "core/tin.hpp"
 #include "core/triangulate.hpp"
 
@@ -42,27 +43,6 @@ public:
     const Tin& tin() const { return tin_; }
 
 private:
-    struct QueueEntry {
-        std::int64_t error_points;
-        double fraction;
-        double total_error;
-        Index t;
-        std::uint32_t version;
-        // Most error points first, then error-point fraction, total error, lower index.
-        friend bool operator<(const QueueEntry& a, const QueueEntry& b) {
-            if (a.error_points != b.error_points) {
-                return a.error_points < b.error_points;
-            }
-            if (a.fraction != b.fraction) {
-                return a.fraction < b.fraction;
-            }
-            if (a.total_error != b.total_error) {
-                return a.total_error < b.total_error;
-            }
-            return a.t > b.t;
-        }
-    };
-
     TriangleStats scan(Index a, Index b, Index c, std::int64_t stop_at = INT64_MAX) const;
     TriangleStats scan(Index t) const;
     void set_stats(Index t, const TriangleStats& st); // also (re)queues t
@@ -83,8 +63,7 @@ private:
     std::int64_t max_edge2_floor_; // the largest integer squared length <= max_edge^2
     Tin tin_;
     std::vector<TriangleStats> stats_;
-    std::vector<std::uint32_t> version_;
-    std::priority_queue<QueueEntry> queue_;
+    SplitQueue queue_; // every live triangle with error points
     // Triangles that may have an edge over max_edge: (squared longest edge, -t), longest first.
     // Entries go stale when t changes; a changed triangle is always pushed again.
     std::priority_queue<std::pair<std::int64_t, std::int64_t>> long_queue_;

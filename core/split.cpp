@@ -61,9 +61,8 @@ void Refiner::compact() {
         stats[t] = stats_[old_of[t]];
     }
     stats_ = std::move(stats);
-    version_.assign(stats_.size(), 0);
     dirty_.assign(tin_.points.size(), 1);
-    queue_ = {};
+    queue_.clear();
     long_queue_ = {};
     for (Index t = 0; t < stats_.size(); ++t) {
         Index e = kNone;
@@ -74,7 +73,7 @@ void Refiner::compact() {
         const TriangleStats& st = stats_[t];
         if (st.error_points > 0) {
             const double fraction = static_cast<double>(st.error_points) / st.samples;
-            queue_.push({st.error_points, fraction, st.total_error, t, version_[t]});
+            queue_.set(t, st.error_points, fraction, st.total_error);
         }
     }
 }
@@ -90,11 +89,9 @@ TriangleStats Refiner::scan(Index t) const {
 void Refiner::set_stats(Index t, const TriangleStats& st) {
     if (stats_.size() <= t) {
         stats_.resize(tin_.triangle_slots());
-        version_.resize(tin_.triangle_slots(), 0);
     }
     error_points_ += st.error_points - stats_[t].error_points;
     stats_[t] = st;
-    ++version_[t];
     if (dirty_.size() < tin_.points.size()) {
         dirty_.resize(tin_.points.size() + tin_.points.size() / 2, 1);
     }
@@ -112,7 +109,9 @@ void Refiner::set_stats(Index t, const TriangleStats& st) {
     }
     if (st.error_points > 0) {
         const double fraction = static_cast<double>(st.error_points) / st.samples;
-        queue_.push({st.error_points, fraction, st.total_error, t, version_[t]});
+        queue_.set(t, st.error_points, fraction, st.total_error);
+    } else {
+        queue_.erase(t);
     }
 }
 
@@ -332,12 +331,8 @@ void Refiner::split_until_clean() {
             shorten(e, stack);
             continue;
         }
-        const QueueEntry top = queue_.top();
-        queue_.pop();
-        const Index t = top.t;
-        if (top.version != version_[t] || !tin_.alive(t) || stats_[t].error_points == 0) {
-            continue;
-        }
+        const Index t = queue_.top();
+        TB_ASSERT(tin_.alive(t) && stats_[t].error_points > 0);
         const std::int64_t s = stats_[t].worst_sample;
         TB_ASSERT(s >= 0);
         const GridPoint q{static_cast<std::int32_t>(s % grid_.width),
