@@ -52,7 +52,7 @@ struct Conn {
     std::uint32_t events = 0;                    // epoll interest; 0 when not registered
     int served = 0;
     bool peer_done = false;   // the client will send nothing more
-    bool close_after = false; // close once `out` is written
+    bool close_after = false; // close once the response is written
 };
 
 Peer peer_of(int fd) {
@@ -264,7 +264,7 @@ struct Connections::Impl {
     // can answer (as many as are pipelined, while their responses go out at once), or hands a
     // complete request to a worker.
     void advance(std::uint64_t id, Conn& c) {
-        // A loop, not recursion through write_out: a client may pipeline thousands of requests.
+        // A loop, not recursion through write_out: a client may pipeline hundreds of requests.
         while (advance_one(id, c)) {
         }
     }
