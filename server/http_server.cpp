@@ -1479,9 +1479,9 @@ bool HttpServer::running() const {
     return impl_->server.is_running();
 }
 
-Reply HttpServer::answer(std::string_view request, bool last) {
+Reply HttpServer::answer(std::string_view request, bool last, bool quick) {
     Reply reply;
-    if (!impl_->quick(request, last, reply)) {
+    if (!quick || !impl_->quick(request, last, reply)) {
         return impl_->answer(request, Peer{"127.0.0.1", 0}, last);
     }
     if (reply.body) {
