@@ -10,6 +10,7 @@
 #include <sys/epoll.h>
 #include <sys/eventfd.h>
 #include <sys/socket.h>
+#include <sys/uio.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -43,14 +44,15 @@ struct Conn {
     int fd = -1;
     Peer peer;
     Phase phase = Phase::Idle;
-    Clock::time_point since; // start of the phase (Write: last progress)
-    std::string in;          // received, not yet answered
-    std::string out;         // response bytes not yet written
-    std::size_t out_pos = 0;
-    std::uint32_t events = 0; // epoll interest; 0 when not registered
+    Clock::time_point since;                     // start of the phase (Write: last progress)
+    std::string in;                              // received, not yet answered
+    std::string out;                             // the response (or its head)
+    std::shared_ptr<const std::string> out_body; // then this, when not null
+    std::size_t out_pos = 0;                     // bytes of out + out_body written
+    std::uint32_t events = 0;                    // epoll interest; 0 when not registered
     int served = 0;
     bool peer_done = false;   // the client will send nothing more
-    bool close_after = false; // close once `out` is written
+    bool close_after = false; // close once the response is written
 };
 
 Peer peer_of(int fd) {
@@ -220,12 +222,20 @@ struct Connections::Impl {
 
     void refuse(std::uint64_t id, Conn& c, int status, const std::string& why) {
         c.in.clear();
-        c.out = handlers.refuse(status, why, c.peer);
+        Reply reply;
+        reply.bytes = handlers.refuse(status, why, c.peer);
+        reply.close = true;
+        start_write(c, std::move(reply));
+        write_out(id, c);
+    }
+
+    static void start_write(Conn& c, Reply reply) {
+        c.out = std::move(reply.bytes);
+        c.out_body = std::move(reply.body);
         c.out_pos = 0;
-        c.close_after = true;
+        c.close_after = reply.close;
         c.phase = Phase::Write;
         c.since = Clock::now();
-        flush(id, c);
     }
 
     // Reads what is there, up to what one request may hold.
@@ -250,8 +260,18 @@ struct Connections::Impl {
         return true;
     }
 
-    // Moves a reading connection on: waits, refuses, or hands a complete request to a worker.
+    // Moves a reading connection on: waits, refuses, answers complete requests that `quick`
+    // can answer (as many as are pipelined, while their responses go out at once), or hands a
+    // complete request to a worker.
     void advance(std::uint64_t id, Conn& c) {
+        // A loop, not recursion through write_out: a client may pipeline hundreds of requests.
+        while (advance_one(id, c)) {
+        }
+    }
+
+    // One step of advance(); true when a response was written in full and the connection waits
+    // for its next request.
+    bool advance_one(std::uint64_t id, Conn& c) {
         // RFC 9112 section 2.2: empty lines before a request line are ignored.
         std::size_t skip = 0;
         while (skip < c.in.size() && (c.in[skip] == '\r' || c.in[skip] == '\n')) {
@@ -261,7 +281,7 @@ struct Connections::Impl {
             c.in.erase(0, skip);
         } else if (skip > 8) {
             refuse(id, c, 400, "the request starts with too many empty lines");
-            return;
+            return false;
         }
         bool draining_now;
         {
@@ -271,14 +291,14 @@ struct Connections::Impl {
         if (c.in.empty()) {
             if (c.peer_done || draining_now) {
                 close_conn(id);
-                return;
+                return false;
             }
             if (c.phase != Phase::Idle) {
                 c.phase = Phase::Idle;
                 c.since = Clock::now();
             }
             set_events(id, c, EPOLLIN | EPOLLRDHUP);
-            return;
+            return false;
         }
         if (c.phase == Phase::Idle) {
             c.phase = Phase::Head;
@@ -287,15 +307,15 @@ struct Connections::Impl {
         const RequestHead head = check_request_head(c.in, limits.head);
         if (head.state == RequestHead::State::Bad) {
             refuse(id, c, head.status, head.error);
-            return;
+            return false;
         }
         if (head.state == RequestHead::State::Incomplete) {
             if (c.peer_done || draining_now) {
                 close_conn(id);
-                return;
+                return false;
             }
             set_events(id, c, EPOLLIN | EPOLLRDHUP);
-            return;
+            return false;
         }
         const std::size_t need = head.head_bytes + head.body_bytes;
         if (c.in.size() < need) {
@@ -305,16 +325,25 @@ struct Connections::Impl {
             }
             if (c.peer_done || draining_now) {
                 close_conn(id);
-                return;
+                return false;
             }
             set_events(id, c, EPOLLIN | EPOLLRDHUP);
-            return;
+            return false;
+        }
+        ++c.served;
+        const bool last = c.served >= limits.max_requests || c.peer_done || draining_now;
+        if (handlers.quick) {
+            Reply reply;
+            if (handlers.quick(std::string_view(c.in).substr(0, need), c.peer, last, reply)) {
+                c.in.erase(0, need);
+                reply.close = reply.close || last;
+                start_write(c, std::move(reply));
+                return write_out(id, c);
+            }
         }
         std::string request = c.in.substr(0, need);
         c.in.erase(0, need);
         c.phase = Phase::Busy;
-        ++c.served;
-        const bool last = c.served >= limits.max_requests || c.peer_done || draining_now;
         set_events(id, c, 0); // nothing more is read until this request is answered
         Peer peer = c.peer;
         {
@@ -330,12 +359,29 @@ struct Connections::Impl {
             });
         }
         job_cv.notify_one();
+        return false;
     }
 
-    void flush(std::uint64_t id, Conn& c) {
-        while (c.out_pos < c.out.size()) {
-            const ssize_t n =
-                send(c.fd, c.out.data() + c.out_pos, c.out.size() - c.out_pos, MSG_NOSIGNAL);
+    // Writes what is left of the response without blocking. True when all of it is written and
+    // the connection is kept, now Idle; false when it waits for EPOLLOUT or has been closed.
+    bool write_out(std::uint64_t id, Conn& c) {
+        const std::size_t head = c.out.size();
+        const std::size_t total = head + (c.out_body ? c.out_body->size() : 0);
+        while (c.out_pos < total) {
+            iovec parts[2];
+            int n_parts = 0;
+            if (c.out_pos < head) {
+                parts[n_parts++] = {c.out.data() + c.out_pos, head - c.out_pos};
+            }
+            if (c.out_body && !c.out_body->empty()) {
+                const std::size_t from = c.out_pos > head ? c.out_pos - head : 0;
+                parts[n_parts++] = {const_cast<char*>(c.out_body->data()) + from,
+                                    c.out_body->size() - from};
+            }
+            msghdr msg{};
+            msg.msg_iov = parts;
+            msg.msg_iovlen = static_cast<std::size_t>(n_parts);
+            const ssize_t n = sendmsg(c.fd, &msg, MSG_NOSIGNAL);
             if (n > 0) {
                 c.out_pos += static_cast<std::size_t>(n);
                 c.since = Clock::now();
@@ -346,20 +392,27 @@ struct Connections::Impl {
             }
             if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) {
                 set_events(id, c, EPOLLOUT);
-                return;
+                return false;
             }
             close_conn(id); // the client is gone
-            return;
+            return false;
         }
         c.out.clear();
+        c.out_body.reset();
         c.out_pos = 0;
         if (c.close_after) {
             close_conn(id);
-            return;
+            return false;
         }
         c.phase = Phase::Idle;
         c.since = Clock::now();
-        advance(id, c); // a pipelined request may be waiting in `in`
+        return true;
+    }
+
+    void flush(std::uint64_t id, Conn& c) {
+        if (write_out(id, c)) {
+            advance(id, c); // a pipelined request may be waiting in `in`
+        }
     }
 
     void on_event(std::uint64_t id, std::uint32_t events) {
@@ -474,11 +527,8 @@ struct Connections::Impl {
                     continue;
                 }
                 Conn& c = it->second;
-                c.out = std::move(reply.bytes);
-                c.out_pos = 0;
-                c.close_after = reply.close || draining_now;
-                c.phase = Phase::Write;
-                c.since = Clock::now();
+                reply.close = reply.close || draining_now;
+                start_write(c, std::move(reply));
                 flush(id, c);
             }
             const auto now = Clock::now();

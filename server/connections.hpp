@@ -1,7 +1,9 @@
 #pragma once
 // The connection loop of the HTTP server: one epoll thread owns every socket, reads requests
 // without blocking, and hands each complete request (head and body, framing checked) to a
-// fixed pool of worker threads; responses go back to the loop, which writes them out.
+// fixed pool of worker threads; responses go back to the loop, which writes them out. A request
+// the `quick` handler can answer without blocking (a tile already in memory) is answered on the
+// loop's thread instead, with no handoff.
 //
 // So a connection costs a thread only while its request is being answered: idle keep-alive
 // connections and clients that send slowly hold a file descriptor and a buffer, nothing more.
@@ -39,6 +41,8 @@ struct Peer {
 // What a worker makes of one request: the response bytes, and whether to close afterwards.
 struct Reply {
     std::string bytes;
+    // Sent after `bytes`, not copied: the immutable body of a cached tile. May be null.
+    std::shared_ptr<const std::string> body;
     bool close = false;
 };
 
@@ -46,6 +50,10 @@ struct ConnectionHandlers {
     // Answers one complete request (its head and body bytes). `last`: the connection closes
     // after this response (say so in it). Runs on a worker thread; must not throw.
     std::function<Reply(std::string_view request, const Peer& peer, bool last)> answer;
+    // Tried first, on the loop's thread: fills `reply` and returns true when it can answer the
+    // request at once, or returns false to leave it to `answer`. Must never block (no store, no
+    // generation), and not throw; may be empty.
+    std::function<bool(std::string_view request, const Peer& peer, bool last, Reply& reply)> quick;
     // The response to a request that cannot be framed or did not arrive in time (the
     // connection closes after it). Runs on the loop's thread; must be quick and not throw.
     std::function<std::string(int status, const std::string& why, const Peer& peer)> refuse;

@@ -173,7 +173,7 @@ bool is_token_list(std::string_view text) {
     return any && (in_token || after_token);
 }
 
-bool parse_index(const std::string& text, std::size_t max_digits, std::int64_t& out) {
+bool parse_index(std::string_view text, std::size_t max_digits, std::int64_t& out) {
     if (text.empty() || text.size() > max_digits) {
         return false;
     }
@@ -239,12 +239,8 @@ const char* bad_path(const httplib::Request& req) {
     return nullptr;
 }
 
-// True when the request's If-None-Match lists `etag` (or is "*").
-bool not_modified(const httplib::Request& req, const std::string& etag) {
-    if (!req.has_header("If-None-Match")) {
-        return false;
-    }
-    const std::string header = req.get_header_value("If-None-Match");
+// True when If-None-Match value `header` lists `etag` (or is "*").
+bool lists_etag(const std::string& header, const std::string& etag) {
     std::size_t pos = 0;
     while (pos < header.size()) {
         std::size_t comma = header.find(',', pos);
@@ -264,6 +260,12 @@ bool not_modified(const httplib::Request& req, const std::string& etag) {
         pos = comma + 1;
     }
     return false;
+}
+
+// True when the request's If-None-Match lists `etag` (or is "*").
+bool not_modified(const httplib::Request& req, const std::string& etag) {
+    return req.has_header("If-None-Match") &&
+           lists_etag(req.get_header_value("If-None-Match"), etag);
 }
 
 // Documents shorter than this are sent as they are: compression would hardly shrink them.
@@ -451,6 +453,125 @@ bool within(const std::filesystem::path& p, const std::filesystem::path& root) {
                         (rs.back() == '/' || ps[rs.size()] == '/'));
 }
 
+bool equals_ci(std::string_view a, std::string_view b) {
+    if (a.size() != b.size()) {
+        return false;
+    }
+    for (std::size_t i = 0; i < a.size(); ++i) {
+        if (std::tolower(static_cast<unsigned char>(a[i])) !=
+            std::tolower(static_cast<unsigned char>(b[i]))) {
+            return false;
+        }
+    }
+    return true;
+}
+
+// A request the connection loop may answer itself, read from its framed bytes: a GET or HEAD
+// of /{layer}/{z}/{x}/{y}.{glb|drc} over HTTP/1.1, in a plain target (unreserved characters
+// only, so cpp-httplib's decoding would leave it as it is and bad_path would accept it), with no
+// body and none of the headers cpp-httplib acts on by itself (Range, Expect). The header values
+// kept are what cpp-httplib would give the handlers: the first non-empty one of each name, blanks
+// trimmed; a value it would percent-decode is not taken.
+struct QuickRequest {
+    std::string_view method, target, layer, z, x, y, extension;
+    std::string_view origin, if_none_match, connection; // empty: absent
+};
+
+// Header lines longer than this are left to cpp-httplib (it refuses those over 8192 bytes).
+constexpr std::size_t kQuickLineBytes = 4096;
+
+bool parse_quick(std::string_view request, QuickRequest& q) {
+    const auto line_end = request.find("\r\n");
+    if (line_end == std::string_view::npos || line_end > kQuickLineBytes) {
+        return false;
+    }
+    const std::string_view line = request.substr(0, line_end);
+    const auto sp1 = line.find(' ');
+    const auto sp2 = sp1 == std::string_view::npos ? sp1 : line.find(' ', sp1 + 1);
+    if (sp2 == std::string_view::npos || line.substr(sp2 + 1) != "HTTP/1.1") {
+        return false;
+    }
+    q.method = line.substr(0, sp1);
+    q.target = line.substr(sp1 + 1, sp2 - sp1 - 1);
+    if ((q.method != "GET" && q.method != "HEAD") || q.target.size() > kMaxUrlLength) {
+        return false;
+    }
+    for (char c : q.target) {
+        if (!std::isalnum(static_cast<unsigned char>(c)) && c != '/' && c != '-' && c != '.' &&
+            c != '_' && c != '~') {
+            return false;
+        }
+    }
+    // Four segments, single slashes: the tile route's own shape, and no other route's ("web"
+    // is the viewer's files when there is a viewer).
+    std::string_view segments[4];
+    std::string_view rest = q.target;
+    for (auto& segment : segments) {
+        if (rest.empty() || rest[0] != '/') {
+            return false;
+        }
+        rest.remove_prefix(1);
+        segment = rest.substr(0, rest.find('/'));
+        rest.remove_prefix(segment.size());
+        if (segment.empty()) {
+            return false;
+        }
+    }
+    if (!rest.empty() || segments[0] == "." || segments[0] == ".." || segments[0] == "web") {
+        return false;
+    }
+    const auto dot = segments[3].find('.');
+    if (dot == std::string_view::npos) {
+        return false;
+    }
+    q.layer = segments[0];
+    q.z = segments[1];
+    q.x = segments[2];
+    q.y = segments[3].substr(0, dot);
+    q.extension = segments[3].substr(dot + 1);
+    if (q.extension != "glb" && q.extension != "drc") {
+        return false;
+    }
+    std::size_t pos = line_end + 2;
+    for (;;) {
+        const auto end = request.find("\r\n", pos);
+        if (end == std::string_view::npos || end - pos > kQuickLineBytes) {
+            return false;
+        }
+        if (end == pos) {
+            return end + 2 == request.size(); // no body
+        }
+        const std::string_view field = request.substr(pos, end - pos);
+        pos = end + 2;
+        const auto colon = field.find(':');
+        if (colon == std::string_view::npos) {
+            return false;
+        }
+        const std::string_view name = field.substr(0, colon);
+        std::string_view value = field.substr(colon + 1);
+        while (!value.empty() && (value.front() == ' ' || value.front() == '\t')) {
+            value.remove_prefix(1);
+        }
+        while (!value.empty() && (value.back() == ' ' || value.back() == '\t')) {
+            value.remove_suffix(1);
+        }
+        if (equals_ci(name, "Range") || equals_ci(name, "Expect")) {
+            return false;
+        }
+        std::string_view* kept = equals_ci(name, "Origin")          ? &q.origin
+                                 : equals_ci(name, "If-None-Match") ? &q.if_none_match
+                                 : equals_ci(name, "Connection")    ? &q.connection
+                                                                    : nullptr;
+        if (!kept || value.empty() || !kept->empty()) {
+            continue; // cpp-httplib drops empty values and answers with the first
+        }
+        if (value.find('%') != std::string_view::npos) {
+            return false;
+        }
+        *kept = value;
+    }
+}
+
 // The request bytes of one framed request, read by cpp-httplib's parser; what it writes is the
 // response. Reading stops at the end of this request, so it can never eat into the next one.
 class MemoryStream final : public httplib::Stream {
@@ -561,6 +682,8 @@ struct HttpServer::Impl {
     bool stop_requested = false;
     std::vector<std::filesystem::path> web_roots; // canonical; files are served from these only
     std::shared_ptr<const Blob> layers_blob;      // /layers never changes while serving
+    std::string keep_alive;                       // the Keep-Alive header cpp-httplib sends
+    bool cors_any = false;                        // cors_origins holds "*"
     std::unique_ptr<Connections> connections;     // last: stopped first
 
     Impl(TileService& t, Metrics& m, const HttpOptions& o) : tiles(t), metrics(m), options(o) {
@@ -568,8 +691,14 @@ struct HttpServer::Impl {
         server.new_task_queue = [] { return new InlineQueue; };
         // These only shape the Keep-Alive header now; the connection loop enforces them.
         server.set_keep_alive_max_count(static_cast<std::size_t>(limits.max_requests));
-        server.set_keep_alive_timeout(std::max<time_t>(
-            1, std::chrono::duration_cast<std::chrono::seconds>(limits.idle_timeout).count()));
+        const time_t keep_alive_seconds = std::max<time_t>(
+            1, std::chrono::duration_cast<std::chrono::seconds>(limits.idle_timeout).count());
+        server.set_keep_alive_timeout(keep_alive_seconds);
+        keep_alive = "timeout=" + std::to_string(keep_alive_seconds) +
+                     ", max=" + std::to_string(limits.max_requests);
+        for (const auto& origin : options.cors_origins) {
+            cors_any = cors_any || origin == "*";
+        }
         server.set_payload_max_length(limits.head.body_bytes);
         // SO_REUSEADDR alone: cpp-httplib's default adds SO_REUSEPORT, with which a second
         // server on the same port starts "successfully" and steals part of the connections.
@@ -606,6 +735,9 @@ struct HttpServer::Impl {
         handlers.answer = [this](std::string_view request, const Peer& peer, bool last) {
             return answer(request, peer, last);
         };
+        handlers.quick = [this](std::string_view request, const Peer&, bool last, Reply& reply) {
+            return quick(request, last, reply);
+        };
         handlers.refuse = [this](int status, const std::string& why, const Peer& peer) {
             return refuse(status, why, peer);
         };
@@ -641,6 +773,103 @@ struct HttpServer::Impl {
         }
         reply.close = !ok || closed || last || reply.bytes.empty();
         return reply;
+    }
+
+    // The answer to a request for a tile already in memory, made without cpp-httplib and so
+    // cheap enough for the connection loop's thread: the bytes the routes above would send
+    // (pre-routing's CORS, serve_tile and send_blob, cpp-httplib's framing headers, sorted by
+    // name as its header map sorts them), the same metrics and access log line. False, with
+    // nothing counted, for anything else (see parse_quick) and for tiles not in memory.
+    bool quick(std::string_view request, bool last, Reply& reply) {
+        const auto start = std::chrono::steady_clock::now();
+        QuickRequest q;
+        std::int64_t z = 0, x = 0, y = 0;
+        if (!parse_quick(request, q) || !parse_index(q.z, 2, z) || !parse_index(q.x, 10, x) ||
+            !parse_index(q.y, 10, y) || z > tiler::kMaxZoom) {
+            return false;
+        }
+        const tiler::Format format = q.extension == "glb" ? tiler::Format::Glb : tiler::Format::Drc;
+        const auto blob = tiles.cached_tile(
+            std::string(q.layer), tiler::TileId{static_cast<int>(z), x, y}, format);
+        if (!blob) {
+            return false;
+        }
+        const bool head = q.method == "HEAD";
+        const bool fresh =
+            !q.if_none_match.empty() && lists_etag(std::string(q.if_none_match), blob->etag);
+        const int status = fresh ? 304 : 200;
+        // cpp-httplib closes on exactly "close" (and on HTTP/1.0, which is not taken here).
+        reply.close = last || q.connection == "close";
+        std::string& out = reply.bytes;
+        out.reserve(512);
+        out += fresh ? "HTTP/1.1 304 Not Modified\r\n" : "HTTP/1.1 200 OK\r\n";
+        if (head) {
+            out += "Accept-Ranges: bytes\r\n";
+        }
+        bool vary_origin = false;
+        if (cors_any) {
+            out += "Access-Control-Allow-Origin: *\r\n";
+        } else if (!q.origin.empty()) {
+            for (const auto& o : options.cors_origins) {
+                if (o == q.origin) {
+                    out += "Access-Control-Allow-Origin: ";
+                    out += o;
+                    out += "\r\n";
+                }
+            }
+            vary_origin = true;
+        }
+        if (!options.cors_origins.empty()) {
+            out += "Access-Control-Expose-Headers: ETag, Content-Length, Retry-After\r\n";
+        }
+        out += "Cache-Control: ";
+        out += kTileCacheControl;
+        out += "\r\n";
+        if (reply.close) {
+            out += "Connection: close\r\n";
+        }
+        out += "Content-Length: ";
+        out += fresh ? "0" : std::to_string(blob->bytes.size());
+        out += "\r\n";
+        if (!fresh) {
+            out += "Content-Type: ";
+            out += tiler::media_type(format);
+            out += "\r\n";
+        }
+        out += "ETag: ";
+        out += blob->etag;
+        out += "\r\n";
+        if (!reply.close) {
+            out += "Keep-Alive: ";
+            out += keep_alive;
+            out += "\r\n";
+        }
+        if (vary_origin) {
+            out += "Vary: Origin\r\n";
+        }
+        out += "\r\n";
+        if (!fresh && !head) {
+            reply.body = std::shared_ptr<const std::string>(blob, &blob->bytes);
+        }
+        ++metrics.quick_answers;
+        const double seconds =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        metrics.record_request("tile", status, seconds);
+        if (log::level() <= log::Level::Info) {
+            // As the logger of the routes writes it (the target needs no cleaning here).
+            const std::string_view target =
+                q.target.size() > 200 ? q.target.substr(0, 200) : q.target;
+            char line[160];
+            std::snprintf(line,
+                          sizeof line,
+                          " %d %zu B %.2f ms",
+                          status,
+                          fresh ? std::size_t{0} : blob->bytes.size(),
+                          seconds * 1e3);
+            log::info(std::string(q.method) + " " + std::string(target) +
+                      (q.target.size() > 200 ? "..." : "") + line);
+        }
+        return true;
     }
 
     // The answer to a request the connection loop could not frame (or that came too slowly):
@@ -1250,8 +1479,16 @@ bool HttpServer::running() const {
     return impl_->server.is_running();
 }
 
-Reply HttpServer::answer(std::string_view request, bool last) {
-    return impl_->answer(request, Peer{"127.0.0.1", 0}, last);
+Reply HttpServer::answer(std::string_view request, bool last, bool quick) {
+    Reply reply;
+    if (!quick || !impl_->quick(request, last, reply)) {
+        return impl_->answer(request, Peer{"127.0.0.1", 0}, last);
+    }
+    if (reply.body) {
+        reply.bytes += *reply.body;
+        reply.body.reset();
+    }
+    return reply;
 }
 
 } // namespace tb::server

@@ -53,9 +53,11 @@ public:
     bool running() const;
 
     // Answers one complete request, given as its raw bytes (head and body, already framed by
-    // check_request_head), exactly as a connection would: routing, handlers, error mapping,
-    // the response's bytes. No socket is involved; the fuzz harness calls it directly.
-    Reply answer(std::string_view request, bool last = false);
+    // check_request_head), exactly as a connection would: a tile in memory by the quick path
+    // the connection loop takes, anything else by routing, handlers, error mapping; the whole
+    // response in `bytes`. No socket is involved; the fuzz harness calls it directly, and with
+    // `quick` false (the routes only) to check that both paths give the same bytes.
+    Reply answer(std::string_view request, bool last = false, bool quick = true);
 
 private:
     struct Impl;

@@ -80,6 +80,10 @@ std::string Metrics::render() const {
     counter("tb_http_timeouts_total",
             "Connections closed because a request head, body or response stalled.",
             request_timeouts);
+    counter("tb_http_quick_answers_total",
+            "Requests for tiles in memory answered by the connection loop itself, without a "
+            "worker or cpp-httplib.",
+            quick_answers);
     out << "# HELP tb_compressions_total Documents compressed, by coding (once per ETag while "
            "cached).\n# TYPE tb_compressions_total counter\n"
         << "tb_compressions_total{coding=\"gzip\"} " << gzip_compressions << '\n'

@@ -32,7 +32,8 @@ public:
     std::atomic<std::uint64_t> accepted_connections{0};
     std::atomic<std::uint64_t> refused_connections{0}; // over the connection limit: 503, closed
     std::atomic<std::uint64_t> request_timeouts{0};    // 408s and stalled responses, closed
-    std::atomic<std::uint64_t> gzip_compressions{0};   // documents compressed (once per ETag)
+    std::atomic<std::uint64_t> quick_answers{0};     // cached tiles answered on the connection loop
+    std::atomic<std::uint64_t> gzip_compressions{0}; // documents compressed (once per ETag)
     std::atomic<std::uint64_t> brotli_compressions{0};
     std::atomic<std::int64_t> open_connections{0};
     std::atomic<std::int64_t> in_flight_requests{0};

@@ -480,6 +480,17 @@ std::shared_ptr<const Blob> TileService::tile(const std::string& layer_name,
 }
 
 std::shared_ptr<const Blob>
+TileService::cached_tile(const std::string& layer, const tiler::TileId& id, tiler::Format format) {
+    Impl& s = *impl_;
+    std::shared_ptr<const Blob> blob = s.cache.get(tile_key(layer, id, format, -1));
+    if (!blob || blob->failure != 0) {
+        return nullptr;
+    }
+    ++s.metrics.cache_hits;
+    return blob;
+}
+
+std::shared_ptr<const Blob>
 TileService::terrain(const std::string& layer, const tiler::TileId& id, unsigned extensions) {
     const std::shared_ptr<const Blob> full = tile(layer, id, tiler::Format::Terrain, {});
     if (!full || extensions == tiler::kAllQuantizedMeshExtensions) {

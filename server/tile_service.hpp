@@ -81,6 +81,12 @@ public:
                                      tiler::Format format,
                                      tiler::EpsChoice eps);
 
+    // The tile when the memory cache holds it (a payload, not a remembered failure), else
+    // nullptr. Never reads the store nor generates, so it never waits; what it returns is what
+    // tile() would (a cached key passed tile()'s checks). Counts a cache hit when it finds one.
+    std::shared_ptr<const Blob>
+    cached_tile(const std::string& layer, const tiler::TileId& id, tiler::Format format);
+
     // The layer's quantized-mesh tile with only the extensions in `extensions` (a mask of
     // tiler::QuantizedMeshExtension): the tile with all of them, as tile() gives it, cut down
     // and cached per mask. nullptr when busy, as tile().

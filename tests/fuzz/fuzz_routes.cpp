@@ -3,7 +3,8 @@
 // the router and the handlers (HttpServer::answer), on a real layer of a small generated DEM
 // and a viewer directory holding a link out of it. Also Accept-Encoding negotiation.
 // A crash, a sanitizer report, a response that is not HTTP/1.1, a 500 (an exception escaped a
-// handler) or a file from outside the viewer's directory is a finding.
+// handler), a file from outside the viewer's directory, or a quick-path answer (a tile in
+// memory) that differs from the routes' answer to the same bytes is a finding.
 #include "server/encoding.hpp"
 #include "server/http_server.hpp"
 #include "server/request_head.hpp"
@@ -73,7 +74,13 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         head.head_bytes + head.body_bytes > bytes.size()) {
         return 0;
     }
-    const auto reply = world->http->answer(bytes.substr(0, head.head_bytes + head.body_bytes));
+    const std::string_view request = bytes.substr(0, head.head_bytes + head.body_bytes);
+    const auto quick_before = world->metrics.quick_answers.load();
+    const auto reply = world->http->answer(request);
+    if (world->metrics.quick_answers.load() != quick_before &&
+        world->http->answer(request, false, false).bytes != reply.bytes) {
+        std::abort();
+    }
     const std::string& out = reply.bytes;
     if (out.rfind("HTTP/1.1 ", 0) != 0 || out.size() < 12) {
         std::abort();
