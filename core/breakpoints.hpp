@@ -36,11 +36,11 @@ struct HeightGrid;
 // The anchor points of §3.1: the breakpoints of the four borders (rows read left to right,
 // columns top to bottom), then the breakpoints of the vertical scan lines through the interior
 // breakpoints of the horizontal border with fewer breakpoints, and of the horizontal scan lines
-// through those of the vertical border with fewer breakpoints. Beyond the paper, while the
-// anchors stay within 1% of the samples (coarse eps), denser scan lines: through the other
-// border's breakpoints too, then halfway between neighbouring lines, level by level. Sorted
-// in raster order, unique, always containing the four corners; a pure function of (grid, eps,
-// max_step). max_step as in fit_breakpoints, for every fit.
+// through those of the vertical border with fewer breakpoints. Beyond the paper, when the
+// anchors would stay within 1% of the samples (coarse eps), the scan lines through the other
+// two borders' breakpoints as well. Sorted in raster order, unique, always containing the four
+// corners; a pure function of (grid, eps, max_step). max_step as in fit_breakpoints, for every
+// fit.
 std::vector<GridPoint> anchor_points(const HeightGrid& grid, double eps, int max_step = 0);
 
 // The breakpoints of one border: side 0 = top row (y = 0), 1 = bottom row, 2 = left column
