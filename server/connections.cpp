@@ -82,6 +82,8 @@ struct Connections::Impl {
     ConnectionLimits limits;
     ConnectionHandlers handlers;
     Metrics& metrics;
+    // Connections open on every loop together, against limits.max_connections.
+    std::shared_ptr<std::atomic<std::size_t>> open;
     int epoll_fd = -1;
     int wake_fd = -1;
 
@@ -104,8 +106,12 @@ struct Connections::Impl {
     std::thread loop_thread;
     bool loop_done = false; // under `mutex`
 
-    Impl(const ConnectionLimits& l, int n_workers, ConnectionHandlers h, Metrics& m)
-        : limits(l), handlers(std::move(h)), metrics(m) {
+    Impl(const ConnectionLimits& l,
+         int n_workers,
+         ConnectionHandlers h,
+         Metrics& m,
+         std::shared_ptr<std::atomic<std::size_t>> shared_open)
+        : limits(l), handlers(std::move(h)), metrics(m), open(std::move(shared_open)) {
         epoll_fd = epoll_create1(EPOLL_CLOEXEC);
         wake_fd = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
         if (epoll_fd < 0 || wake_fd < 0) {
@@ -193,6 +199,7 @@ struct Connections::Impl {
         set_events(id, it->second, 0);
         close(it->second.fd);
         conns.erase(it);
+        --*open;
         --metrics.open_connections;
     }
 
@@ -202,7 +209,11 @@ struct Connections::Impl {
         fcntl(fd, F_SETFL, flags | O_NONBLOCK);
         const int one = 1;
         setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
-        if (refuse_all || conns.size() >= limits.max_connections) {
+        // Counted in before the test, so that two loops adopting at once cannot both pass it.
+        if (refuse_all || open->fetch_add(1) >= limits.max_connections) {
+            if (!refuse_all) {
+                --*open;
+            }
             // Over the limit (or stopping): a short 503, best effort, and close.
             ++metrics.refused_connections;
             const std::string text =
@@ -550,27 +561,42 @@ struct Connections::Impl {
 Connections::Connections(const ConnectionLimits& limits,
                          int workers,
                          ConnectionHandlers handlers,
-                         Metrics& metrics)
-    : impl_(std::make_unique<Impl>(limits, workers, std::move(handlers), metrics)) {}
+                         Metrics& metrics,
+                         int loops) {
+    const auto open = std::make_shared<std::atomic<std::size_t>>(0);
+    for (int i = 0; i < std::max(1, loops); ++i) {
+        loops_.push_back(std::make_unique<Impl>(limits, workers, handlers, metrics, open));
+    }
+}
 
-Connections::~Connections() = default;
+Connections::~Connections() {
+    // Every loop drains at once, then each is joined (and its workers) in turn.
+    for (auto& loop : loops_) {
+        loop->start_drain();
+    }
+}
 
 void Connections::adopt(int fd) {
+    Impl& impl = *loops_[next_loop_.fetch_add(1) % loops_.size()];
     {
-        std::lock_guard<std::mutex> lock(impl_->mutex);
-        if (impl_->loop_done) {
+        std::lock_guard<std::mutex> lock(impl.mutex);
+        if (impl.loop_done) {
             close(fd);
             return;
         }
-        impl_->adopted.push_back(fd);
+        impl.adopted.push_back(fd);
     }
-    impl_->wake();
+    impl.wake();
 }
 
 void Connections::drain() {
-    impl_->start_drain();
-    if (impl_->loop_thread.joinable()) {
-        impl_->loop_thread.join();
+    for (auto& loop : loops_) {
+        loop->start_drain();
+    }
+    for (auto& loop : loops_) {
+        if (loop->loop_thread.joinable()) {
+            loop->loop_thread.join();
+        }
     }
 }
 

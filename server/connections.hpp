@@ -1,7 +1,8 @@
 #pragma once
-// The connection loop of the HTTP server: one epoll thread owns every socket, reads requests
-// without blocking, and hands each complete request (head and body, framing checked) to a
-// fixed pool of worker threads; responses go back to the loop, which writes them out. A request
+// The connection loops of the HTTP server: each epoll thread owns the sockets given to it (in
+// turn, one loop per core), reads requests without blocking, and hands each complete request
+// (head and body, framing checked) to its fixed pool of worker threads; responses go back to
+// the loop, which writes them out. A request
 // the `quick` handler can answer without blocking (a tile already in memory) is answered on the
 // loop's thread instead, with no handoff.
 //
@@ -15,11 +16,13 @@
 #include "server/metrics.hpp"
 #include "server/request_head.hpp"
 
+#include <atomic>
 #include <chrono>
 #include <functional>
 #include <memory>
 #include <string>
 #include <string_view>
+#include <vector>
 
 namespace tb::server {
 
@@ -61,10 +64,14 @@ struct ConnectionHandlers {
 
 class Connections {
 public:
+    // `loops` connection loops (at least 1), each on its own thread with its own `workers`
+    // worker threads; new connections go to them in turn, and max_connections holds for all of
+    // them together.
     Connections(const ConnectionLimits& limits,
                 int workers,
                 ConnectionHandlers handlers,
-                Metrics& metrics);
+                Metrics& metrics,
+                int loops = 1);
     ~Connections(); // drain() and join, if not done yet
     Connections(const Connections&) = delete;
     Connections& operator=(const Connections&) = delete;
@@ -78,7 +85,8 @@ public:
 
 private:
     struct Impl;
-    std::unique_ptr<Impl> impl_;
+    std::vector<std::unique_ptr<Impl>> loops_;
+    std::atomic<std::size_t> next_loop_{0};
 };
 
 } // namespace tb::server

@@ -29,6 +29,7 @@
 #include <fstream>
 #include <mutex>
 #include <sstream>
+#include <thread>
 
 namespace tb::server {
 namespace {
@@ -38,6 +39,8 @@ constexpr const char* kTileCacheControl = "public, max-age=604800"; // a week: t
 constexpr const char* kDocumentCacheControl = "public, max-age=60";
 constexpr const char* kNoStore = "no-store";
 constexpr int kRetryAfterSeconds = 1;
+// Connection loops at most (one per core below that).
+constexpr unsigned kMaxLoops = 4;
 
 // Per-request bookkeeping. cpp-httplib handles a request on one thread from the pre-routing
 // handler to the logger, so a thread_local carries it between them.
@@ -741,11 +744,16 @@ struct HttpServer::Impl {
         handlers.refuse = [this](int status, const std::string& why, const Peer& peer) {
             return refuse(status, why, peer);
         };
+        // One connection loop per core (up to 4): cached tiles are answered on the loops'
+        // threads, so one loop alone would leave the other cores to the clients.
+        const int loops = static_cast<int>(
+            std::clamp<unsigned>(std::thread::hardware_concurrency(), 1u, kMaxLoops));
         connections =
             std::make_unique<Connections>(capped,
                                           std::max(2, options.http_threads) + tiles.max_waiting(),
                                           std::move(handlers),
-                                          metrics);
+                                          metrics,
+                                          loops);
         server.adopt = [this](socket_t sock) { connections->adopt(sock); };
     }
 
