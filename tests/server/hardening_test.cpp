@@ -49,15 +49,7 @@ Fixture& fixture() {
 // A raw TCP connection to the server: bytes exactly as written, no client-side framing.
 struct Raw {
     int fd = -1;
-    explicit Raw(int port) {
-        fd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-        REQUIRE(fd >= 0);
-        sockaddr_in addr{};
-        addr.sin_family = AF_INET;
-        addr.sin_port = htons(static_cast<std::uint16_t>(port));
-        addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-        REQUIRE(connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0);
-    }
+    explicit Raw(int port) : fd(test::connect_loopback(port)) {}
     ~Raw() {
         if (fd >= 0) {
             close(fd);

@@ -19,19 +19,11 @@ using test::RunningServer;
 using test::TempDir;
 
 // One DEM and its layer, shared by the tests of this file (opening a layer reads the DEM).
-struct Fixture {
-    TempDir dir;
-    std::shared_ptr<const tiler::Layer> layer;
-    tiler::TileId inside;  // a tile that holds data, at max zoom
+struct Fixture : test::HillsLayer {
     tiler::TileId outside; // a valid tile of the scheme with no data
 
     Fixture() {
-        log::set_level(log::Level::Warn);
-        test::write_dem(dir / "hills.asc");
-        layer = tiler::Layer::open(test::test_layer_options(dir / "hills.asc", "hills"));
         const auto r = layer->tiles_at(layer->max_zoom());
-        REQUIRE(!r.empty());
-        inside = {layer->max_zoom(), r.x0, r.y0};
         outside = {layer->max_zoom(), r.x1 + 5, r.y0};
     }
     server::ServedLayer served(std::shared_ptr<tiler::TileStore> store = nullptr) const {

@@ -21,18 +21,7 @@ namespace {
 
 using namespace tb;
 
-struct Fixture {
-    test::TempDir dir;
-    std::shared_ptr<const tiler::Layer> layer;
-    tiler::TileId inside; // a tile that holds data, at max zoom
-    Fixture() {
-        log::set_level(log::Level::Warn);
-        test::write_dem(dir / "hills.asc");
-        layer = tiler::Layer::open(test::test_layer_options(dir / "hills.asc", "hills"));
-        const auto r = layer->tiles_at(layer->max_zoom());
-        REQUIRE(!r.empty());
-        inside = {layer->max_zoom(), r.x0, r.y0};
-    }
+struct Fixture : test::HillsLayer {
     server::ServedLayer served() const {
         return {layer, {tiler::Format::Glb, tiler::Format::Drc}, nullptr};
     }
@@ -60,15 +49,7 @@ struct Conn {
     int fd = -1;
     std::string buffer;
 
-    explicit Conn(int port) {
-        fd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-        REQUIRE(fd >= 0);
-        sockaddr_in addr{};
-        addr.sin_family = AF_INET;
-        addr.sin_port = htons(static_cast<std::uint16_t>(port));
-        addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-        REQUIRE(connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0);
-    }
+    explicit Conn(int port) : fd(test::connect_loopback(port)) {}
     ~Conn() { close(fd); }
     Conn(const Conn&) = delete;
     Conn& operator=(const Conn&) = delete;

@@ -6,16 +6,27 @@
 #include "server/metrics.hpp"
 #include "server/tile_service.hpp"
 
+#include "tiler/layer.hpp"
+#include "tiler/log.hpp"
+
 #include <httplib.h>
+
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
 #include <atomic>
 #include <chrono>
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <memory>
 #include <random>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 #include <thread>
 
@@ -83,6 +94,42 @@ inline tiler::LayerOptions test_layer_options(const std::string& dem, const std:
     o.max_zoom = 8;
     o.eps_levels = {5.0, 20.0};
     return o;
+}
+
+// The generated hills DEM as a layer (test_layer_options), and a tile of its max zoom that
+// holds data.
+struct HillsLayer {
+    TempDir dir;
+    std::shared_ptr<const tiler::Layer> layer;
+    tiler::TileId inside;
+    HillsLayer() {
+        log::set_level(log::Level::Warn);
+        write_dem(dir / "hills.asc");
+        layer = tiler::Layer::open(test_layer_options(dir / "hills.asc", "hills"));
+        const auto r = layer->tiles_at(layer->max_zoom());
+        if (r.empty()) {
+            throw std::runtime_error("the hills layer has no tile at its max zoom");
+        }
+        inside = {layer->max_zoom(), r.x0, r.y0};
+    }
+};
+
+// A blocking TCP socket connected to 127.0.0.1:port; throws when it cannot connect.
+inline int connect_loopback(int port) {
+    const int fd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    if (fd < 0) {
+        throw std::runtime_error(std::string("socket: ") + std::strerror(errno));
+    }
+    sockaddr_in addr{};
+    addr.sin_family = AF_INET;
+    addr.sin_port = htons(static_cast<std::uint16_t>(port));
+    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    if (connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0) {
+        const std::string why = std::strerror(errno);
+        close(fd);
+        throw std::runtime_error("connect to 127.0.0.1:" + std::to_string(port) + ": " + why);
+    }
+    return fd;
 }
 
 // A TileService and HttpServer running in this process on 127.0.0.1:<ephemeral>.
