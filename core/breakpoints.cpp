@@ -262,8 +262,9 @@ std::vector<GridPoint> anchor_points(const HeightGrid& grid, double eps, int max
     }
     // The scan lines through the other two borders' breakpoints too, when the anchors stay
     // few (see kAnchorBudget). Judged by a forecast (each new line has as many interior
-    // breakpoints as the two borders it joins have on average), so no line is fitted to be
-    // thrown away.
+    // breakpoints as the two borders parallel to it have on average), so no line is fitted to
+    // be thrown away; the forecast can be wrong either way (a rugged interior between flat
+    // borders), so the budget steers the cost, it does not bound the count.
     std::vector<int> all_cols, all_rows;
     std::set_union(
         top.begin(), top.end(), bottom.begin(), bottom.end(), std::back_inserter(all_cols));

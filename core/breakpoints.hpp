@@ -36,9 +36,9 @@ struct HeightGrid;
 // The anchor points of §3.1: the breakpoints of the four borders (rows read left to right,
 // columns top to bottom), then the breakpoints of the vertical scan lines through the interior
 // breakpoints of the horizontal border with fewer breakpoints, and of the horizontal scan lines
-// through those of the vertical border with fewer breakpoints. Beyond the paper, when the
-// anchors would stay within 1% of the samples (coarse eps), the scan lines through the other
-// two borders' breakpoints as well. Sorted in raster order, unique, always containing the four
+// through those of the vertical border with fewer breakpoints. Beyond the paper, when a
+// forecast from the borders puts the anchors within 1% of the samples (coarse eps), the scan
+// lines through the other two borders' breakpoints as well. Sorted in raster order, unique, always containing the four
 // corners; a pure function of (grid, eps, max_step). max_step as in fit_breakpoints, for every
 // fit.
 std::vector<GridPoint> anchor_points(const HeightGrid& grid, double eps, int max_step = 0);

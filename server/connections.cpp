@@ -31,6 +31,8 @@ using Clock = std::chrono::steady_clock;
 constexpr std::uint64_t kWakeId = 0;      // epoll data of the eventfd
 constexpr std::size_t kReadChunk = 16384; // bytes per recv
 constexpr auto kSweepEvery = std::chrono::milliseconds(50);
+// Requests one connection may have answered in a row before the loop turns to the others.
+constexpr int kAnswersPerTurn = 16;
 
 enum class Phase {
     Idle,  // between requests (nothing buffered)
@@ -78,6 +80,61 @@ Peer peer_of(int fd) {
 
 } // namespace
 
+// The worker threads every loop hands its complete requests to. Each job posts its reply to the
+// loop it came from; a pool outlives its loops' drains (see ~Connections).
+struct Connections::Pool {
+    std::mutex mutex;
+    std::condition_variable cv;
+    std::deque<std::function<void()>> jobs;
+    bool stop = false;
+    std::vector<std::thread> threads;
+
+    explicit Pool(int n) {
+        for (int i = 0; i < std::max(1, n); ++i) {
+            threads.emplace_back([this] { run(); });
+        }
+    }
+    ~Pool() { join(); }
+
+    void post(std::function<void()> job) {
+        {
+            std::lock_guard<std::mutex> lock(mutex);
+            jobs.push_back(std::move(job));
+        }
+        cv.notify_one();
+    }
+
+    // Lets the jobs already posted finish, then joins the threads.
+    void join() {
+        {
+            std::lock_guard<std::mutex> lock(mutex);
+            stop = true;
+        }
+        cv.notify_all();
+        for (auto& t : threads) {
+            if (t.joinable()) {
+                t.join();
+            }
+        }
+    }
+
+    void run() {
+        for (;;) {
+            std::function<void()> job;
+            {
+                std::unique_lock<std::mutex> lock(mutex);
+                cv.wait(lock, [this] { return stop || !jobs.empty(); });
+                if (jobs.empty()) {
+                    return;
+                }
+                job = std::move(jobs.front());
+                jobs.pop_front();
+            }
+            job();
+        }
+    }
+};
+
 struct Connections::Impl {
     ConnectionLimits limits;
     ConnectionHandlers handlers;
@@ -93,25 +150,22 @@ struct Connections::Impl {
     std::vector<std::pair<std::uint64_t, Reply>> replies;
     bool draining = false;
 
-    // Worker pool.
-    std::mutex job_mutex;
-    std::condition_variable job_cv;
-    std::deque<std::function<void()>> jobs;
-    bool workers_stop = false;
-    std::vector<std::thread> workers;
+    Pool& pool; // shared by every loop
 
     // Owned by the loop thread.
     std::unordered_map<std::uint64_t, Conn> conns;
+    std::vector<std::uint64_t> ready; // answered kAnswersPerTurn in a row, more may be buffered
     std::uint64_t next_id = 1;
     std::thread loop_thread;
     bool loop_done = false; // under `mutex`
 
     Impl(const ConnectionLimits& l,
-         int n_workers,
+         Pool& workers,
          ConnectionHandlers h,
          Metrics& m,
          std::shared_ptr<std::atomic<std::size_t>> shared_open)
-        : limits(l), handlers(std::move(h)), metrics(m), open(std::move(shared_open)) {
+        : limits(l), handlers(std::move(h)), metrics(m), open(std::move(shared_open)),
+          pool(workers) {
         epoll_fd = epoll_create1(EPOLL_CLOEXEC);
         wake_fd = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
         if (epoll_fd < 0 || wake_fd < 0) {
@@ -122,27 +176,22 @@ struct Connections::Impl {
         ev.events = EPOLLIN;
         ev.data.u64 = kWakeId;
         epoll_ctl(epoll_fd, EPOLL_CTL_ADD, wake_fd, &ev);
-        for (int i = 0; i < std::max(1, n_workers); ++i) {
-            workers.emplace_back([this] { work(); });
-        }
         loop_thread = std::thread([this] { loop(); });
     }
 
+    // After the pool is joined (~Connections): a job may still wake this loop after posting
+    // its reply, so the descriptors must outlive every job.
     ~Impl() {
         start_drain();
+        join_loop();
+        close(wake_fd);
+        close(epoll_fd);
+    }
+
+    void join_loop() {
         if (loop_thread.joinable()) {
             loop_thread.join();
         }
-        {
-            std::lock_guard<std::mutex> lock(job_mutex);
-            workers_stop = true;
-        }
-        job_cv.notify_all();
-        for (auto& t : workers) {
-            t.join();
-        }
-        close(wake_fd);
-        close(epoll_fd);
     }
 
     void wake() {
@@ -156,22 +205,6 @@ struct Connections::Impl {
             draining = true;
         }
         wake();
-    }
-
-    void work() {
-        for (;;) {
-            std::function<void()> job;
-            {
-                std::unique_lock<std::mutex> lock(job_mutex);
-                job_cv.wait(lock, [this] { return workers_stop || !jobs.empty(); });
-                if (jobs.empty()) {
-                    return;
-                }
-                job = std::move(jobs.front());
-                jobs.pop_front();
-            }
-            job();
-        }
     }
 
     // ---- the loop thread ----
@@ -276,7 +309,13 @@ struct Connections::Impl {
     // complete request to a worker.
     void advance(std::uint64_t id, Conn& c) {
         // A loop, not recursion through write_out: a client may pipeline hundreds of requests.
-        while (advance_one(id, c)) {
+        // After kAnswersPerTurn answers in a row the connection waits in `ready` for the next
+        // turn of the loop, so one pipelining client cannot hold up the loop's other ones.
+        for (int answered = 0; advance_one(id, c);) {
+            if (++answered == kAnswersPerTurn) {
+                ready.push_back(id);
+                return;
+            }
         }
     }
 
@@ -357,19 +396,15 @@ struct Connections::Impl {
         c.phase = Phase::Busy;
         set_events(id, c, 0); // nothing more is read until this request is answered
         Peer peer = c.peer;
-        {
-            std::lock_guard<std::mutex> lock(job_mutex);
-            jobs.emplace_back([this, id, last, request = std::move(request), peer] {
-                Reply reply = handlers.answer(request, peer, last);
-                reply.close = reply.close || last;
-                {
-                    std::lock_guard<std::mutex> lock2(mutex);
-                    replies.emplace_back(id, std::move(reply));
-                }
-                wake();
-            });
-        }
-        job_cv.notify_one();
+        pool.post([this, id, last, request = std::move(request), peer] {
+            Reply reply = handlers.answer(request, peer, last);
+            reply.close = reply.close || last;
+            {
+                std::lock_guard<std::mutex> lock(mutex);
+                replies.emplace_back(id, std::move(reply));
+            }
+            wake();
+        });
         return false;
     }
 
@@ -511,7 +546,7 @@ struct Connections::Impl {
             const int n = epoll_wait(epoll_fd,
                                      events.data(),
                                      static_cast<int>(events.size()),
-                                     static_cast<int>(kSweepEvery.count()));
+                                     ready.empty() ? static_cast<int>(kSweepEvery.count()) : 0);
             std::vector<int> fds;
             std::vector<std::pair<std::uint64_t, Reply>> done;
             bool draining_now;
@@ -542,6 +577,15 @@ struct Connections::Impl {
                 start_write(c, std::move(reply));
                 flush(id, c);
             }
+            std::vector<std::uint64_t> turn;
+            turn.swap(ready);
+            for (auto id : turn) {
+                const auto it = conns.find(id);
+                if (it != conns.end() && (it->second.phase == Phase::Idle ||
+                                          it->second.phase == Phase::Head)) {
+                    advance(id, it->second);
+                }
+            }
             const auto now = Clock::now();
             if (draining_now || now - last_sweep >= kSweepEvery) {
                 sweep(now, draining_now);
@@ -562,18 +606,20 @@ Connections::Connections(const ConnectionLimits& limits,
                          int workers,
                          ConnectionHandlers handlers,
                          Metrics& metrics,
-                         int loops) {
+                         int loops)
+    : pool_(std::make_unique<Pool>(workers)) {
     const auto open = std::make_shared<std::atomic<std::size_t>>(0);
     for (int i = 0; i < std::max(1, loops); ++i) {
-        loops_.push_back(std::make_unique<Impl>(limits, workers, handlers, metrics, open));
+        loops_.push_back(std::make_unique<Impl>(limits, *pool_, handlers, metrics, open));
     }
 }
 
 Connections::~Connections() {
-    // Every loop drains at once, then each is joined (and its workers) in turn.
-    for (auto& loop : loops_) {
-        loop->start_drain();
-    }
+    // Every loop drains (each waits for the replies its workers still owe it), then the
+    // workers are joined, and only then do the loops close their descriptors.
+    drain();
+    pool_->join();
+    loops_.clear();
 }
 
 void Connections::adopt(int fd) {
@@ -594,9 +640,7 @@ void Connections::drain() {
         loop->start_drain();
     }
     for (auto& loop : loops_) {
-        if (loop->loop_thread.joinable()) {
-            loop->loop_thread.join();
-        }
+        loop->join_loop();
     }
 }
 

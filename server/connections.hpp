@@ -1,8 +1,8 @@
 #pragma once
 // The connection loops of the HTTP server: each epoll thread owns the sockets given to it (in
 // turn, one loop per core), reads requests without blocking, and hands each complete request
-// (head and body, framing checked) to its fixed pool of worker threads; responses go back to
-// the loop, which writes them out. A request
+// (head and body, framing checked) to a fixed pool of worker threads they share; responses go
+// back to the loop, which writes them out. A request
 // the `quick` handler can answer without blocking (a tile already in memory) is answered on the
 // loop's thread instead, with no handoff.
 //
@@ -64,9 +64,10 @@ struct ConnectionHandlers {
 
 class Connections {
 public:
-    // `loops` connection loops (at least 1), each on its own thread with its own `workers`
-    // worker threads; new connections go to them in turn, and max_connections holds for all of
-    // them together.
+    // `loops` connection loops (at least 1), each on its own thread, sharing `workers` worker
+    // threads; new connections go to the loops in turn, and max_connections holds for all of
+    // them together (when connections race for the last slots, which of them is refused
+    // depends on the loops' timing).
     Connections(const ConnectionLimits& limits,
                 int workers,
                 ConnectionHandlers handlers,
@@ -84,7 +85,9 @@ public:
     void drain();
 
 private:
+    struct Pool;
     struct Impl;
+    std::unique_ptr<Pool> pool_;
     std::vector<std::unique_ptr<Impl>> loops_;
     std::atomic<std::size_t> next_loop_{0};
 };

@@ -874,8 +874,9 @@ struct HttpServer::Impl {
                           status,
                           fresh ? std::size_t{0} : blob->bytes.size(),
                           seconds * 1e3);
-            log::info(std::string(q.method) + " " + std::string(target) +
-                      (q.target.size() > 200 ? "..." : "") + line);
+            log::write_queued(log::Level::Info,
+                              std::string(q.method) + " " + std::string(target) +
+                                  (q.target.size() > 200 ? "..." : "") + line);
         }
         return true;
     }
@@ -884,8 +885,9 @@ struct HttpServer::Impl {
     // one JSON error, and the connection closes.
     std::string refuse(int status, const std::string& why, const Peer& peer) {
         metrics.record_request(status == 503 ? "refused" : "malformed", status, 0.0);
-        log::info(peer.ip + ":" + std::to_string(peer.port) + " " + std::to_string(status) + " " +
-                  why + "; connection closed");
+        log::write_queued(log::Level::Info,
+                          peer.ip + ":" + std::to_string(peer.port) + " " +
+                              std::to_string(status) + " " + why + "; connection closed");
         const std::string body = "{\"error\":\"" + json_escape(why) + "\"}\n";
         std::string text =
             "HTTP/1.1 " + std::to_string(status) + " " + status_text(status) +
@@ -1188,7 +1190,7 @@ struct HttpServer::Impl {
                               res.status,
                               res.body.size(),
                               seconds * 1e3);
-                log::info(loggable(req) + line);
+                log::write_queued(log::Level::Info, loggable(req) + line);
             }
         });
 

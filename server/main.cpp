@@ -1,6 +1,7 @@
 // terrabound: the command-line entry point. Subcommands live in server/cmd_*.cpp.
 #include "core/error.hpp"
 #include "server/commands.hpp"
+#include "tiler/log.hpp"
 
 #include <cstdio>
 #include <exception>
@@ -70,15 +71,19 @@ int main(int argc, char** argv) {
         }
         return command->run(args);
     } catch (const tb::InputError& e) {
+        tb::log::flush();
         std::fprintf(stderr, "terrabound: %s\n", e.what());
         return 2;
     } catch (const tb::NotFound& e) {
+        tb::log::flush();
         std::fprintf(stderr, "terrabound: %s\n", e.what());
         return 2;
     } catch (const tb::IoError& e) {
+        tb::log::flush();
         std::fprintf(stderr, "terrabound: %s\n", e.what());
         return 3;
     } catch (const std::exception& e) {
+        tb::log::flush();
         std::fprintf(stderr, "terrabound: %s\n", e.what());
         return 1;
     }

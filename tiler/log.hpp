@@ -13,6 +13,15 @@ bool parse_level(std::string_view name, Level& out); // "debug" | "info" | "warn
 
 void write(Level level, std::string_view message); // thread-safe; whole lines only
 
+// The same line, written by a background thread instead of the caller: for the access log of
+// the HTTP server, whose connection loops must never wait on a slow stderr. Lines keep their
+// order among themselves and come out before any later write(); past 10,000 waiting lines they
+// are dropped, and a warning says how many. Written out at exit at the latest.
+void write_queued(Level level, std::string_view message);
+
+// Writes every queued line now (before printing to stderr directly).
+void flush();
+
 inline void debug(std::string_view m) {
     write(Level::Debug, m);
 }
