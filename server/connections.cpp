@@ -1,5 +1,6 @@
 // The epoll connection loop and its worker pool (see connections.hpp).
 #include "server/connections.hpp"
+#include "server/thread_pool.hpp"
 
 #include "tiler/log.hpp"
 
@@ -15,9 +16,7 @@
 
 #include <atomic>
 #include <cerrno>
-#include <condition_variable>
 #include <cstring>
-#include <deque>
 #include <mutex>
 #include <thread>
 #include <unordered_map>
@@ -80,61 +79,6 @@ Peer peer_of(int fd) {
 
 } // namespace
 
-// The worker threads every loop hands its complete requests to. Each job posts its reply to the
-// loop it came from; a pool outlives its loops' drains (see ~Connections).
-struct Connections::Pool {
-    std::mutex mutex;
-    std::condition_variable cv;
-    std::deque<std::function<void()>> jobs;
-    bool stop = false;
-    std::vector<std::thread> threads;
-
-    explicit Pool(int n) {
-        for (int i = 0; i < std::max(1, n); ++i) {
-            threads.emplace_back([this] { run(); });
-        }
-    }
-    ~Pool() { join(); }
-
-    void post(std::function<void()> job) {
-        {
-            std::lock_guard<std::mutex> lock(mutex);
-            jobs.push_back(std::move(job));
-        }
-        cv.notify_one();
-    }
-
-    // Lets the jobs already posted finish, then joins the threads.
-    void join() {
-        {
-            std::lock_guard<std::mutex> lock(mutex);
-            stop = true;
-        }
-        cv.notify_all();
-        for (auto& t : threads) {
-            if (t.joinable()) {
-                t.join();
-            }
-        }
-    }
-
-    void run() {
-        for (;;) {
-            std::function<void()> job;
-            {
-                std::unique_lock<std::mutex> lock(mutex);
-                cv.wait(lock, [this] { return stop || !jobs.empty(); });
-                if (jobs.empty()) {
-                    return;
-                }
-                job = std::move(jobs.front());
-                jobs.pop_front();
-            }
-            job();
-        }
-    }
-};
-
 struct Connections::Impl {
     ConnectionLimits limits;
     ConnectionHandlers handlers;
@@ -150,7 +94,7 @@ struct Connections::Impl {
     std::vector<std::pair<std::uint64_t, Reply>> replies;
     bool draining = false;
 
-    Pool& pool; // shared by every loop
+    ThreadPool& pool; // the workers, shared by every loop; each job posts its reply here
 
     // Owned by the loop thread.
     std::unordered_map<std::uint64_t, Conn> conns;
@@ -160,7 +104,7 @@ struct Connections::Impl {
     bool loop_done = false; // under `mutex`
 
     Impl(const ConnectionLimits& l,
-         Pool& workers,
+         ThreadPool& workers,
          ConnectionHandlers h,
          Metrics& m,
          std::shared_ptr<std::atomic<std::size_t>> shared_open)
@@ -396,7 +340,7 @@ struct Connections::Impl {
         c.phase = Phase::Busy;
         set_events(id, c, 0); // nothing more is read until this request is answered
         Peer peer = c.peer;
-        pool.post([this, id, last, request = std::move(request), peer] {
+        pool.submit([this, id, last, request = std::move(request), peer] {
             Reply reply = handlers.answer(request, peer, last);
             reply.close = reply.close || last;
             {
@@ -607,7 +551,7 @@ Connections::Connections(const ConnectionLimits& limits,
                          ConnectionHandlers handlers,
                          Metrics& metrics,
                          int loops)
-    : pool_(std::make_unique<Pool>(workers)) {
+    : pool_(std::make_unique<ThreadPool>(workers)) {
     const auto open = std::make_shared<std::atomic<std::size_t>>(0);
     for (int i = 0; i < std::max(1, loops); ++i) {
         loops_.push_back(std::make_unique<Impl>(limits, *pool_, handlers, metrics, open));

@@ -26,6 +26,8 @@
 
 namespace tb::server {
 
+class ThreadPool;
+
 struct ConnectionLimits {
     HeadLimits head;
     std::chrono::milliseconds head_timeout{10000};
@@ -85,9 +87,8 @@ public:
     void drain();
 
 private:
-    struct Pool;
     struct Impl;
-    std::unique_ptr<Pool> pool_;
+    std::unique_ptr<ThreadPool> pool_; // outlives the loops' drains (see ~Connections)
     std::vector<std::unique_ptr<Impl>> loops_;
     std::atomic<std::size_t> next_loop_{0};
 };

@@ -1,5 +1,6 @@
 // TileService: LRU -> store -> single-flight generation on a bounded pool.
 #include "server/tile_service.hpp"
+#include "server/thread_pool.hpp"
 
 #include "tiler/formats/quantized_mesh.hpp"
 
@@ -12,9 +13,7 @@
 
 #include <algorithm>
 #include <chrono>
-#include <condition_variable>
 #include <cstdio>
-#include <deque>
 #include <functional>
 #include <future>
 #include <list>
@@ -88,64 +87,14 @@ private:
     std::unordered_map<std::string, std::list<Entry>::iterator> index_;
 };
 
-// A fixed set of threads draining a FIFO of jobs. Admission (the queue limit) is decided by
-// the caller under its own lock, so this stays a plain pool.
-class Pool {
-public:
-    explicit Pool(int threads) {
-        for (int i = 0; i < threads; ++i) {
-            threads_.emplace_back([this] {
-                // Generation yields the CPU to the threads that answer requests, so that health
-                // checks and cache hits stay fast while every core meshes. Linux sets the nice
-                // value per thread, and the mesher's own threads inherit it.
-                if (setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), kGenerationNice) != 0) {
-                    log::debug("cannot lower the priority of a generation thread");
-                }
-                work();
-            });
-        }
+// The generation threads yield the CPU to the threads that answer requests, so that health
+// checks and cache hits stay fast while every core meshes. Linux sets the nice value per
+// thread, and the mesher's own threads inherit it.
+void lower_priority() {
+    if (setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), kGenerationNice) != 0) {
+        log::debug("cannot lower the priority of a generation thread");
     }
-    ~Pool() {
-        {
-            std::lock_guard<std::mutex> lock(mutex_);
-            stopping_ = true;
-        }
-        cv_.notify_all();
-        for (auto& t : threads_) {
-            t.join();
-        }
-    }
-    void submit(std::function<void()> job) {
-        {
-            std::lock_guard<std::mutex> lock(mutex_);
-            jobs_.push_back(std::move(job));
-        }
-        cv_.notify_one();
-    }
-
-private:
-    void work() {
-        for (;;) {
-            std::function<void()> job;
-            {
-                std::unique_lock<std::mutex> lock(mutex_);
-                cv_.wait(lock, [this] { return stopping_ || !jobs_.empty(); });
-                if (jobs_.empty()) {
-                    return; // stopping, and every queued job has run
-                }
-                job = std::move(jobs_.front());
-                jobs_.pop_front();
-            }
-            job();
-        }
-    }
-
-    std::mutex mutex_;
-    std::condition_variable cv_;
-    std::deque<std::function<void()>> jobs_;
-    bool stopping_ = false;
-    std::vector<std::thread> threads_;
-};
+}
 
 std::string
 tile_key(const std::string& layer, const tiler::TileId& id, tiler::Format format, int eps_level) {
@@ -210,7 +159,7 @@ std::string make_etag(std::string_view bytes) {
 
 struct TileService::Impl {
     Impl(const TileServiceOptions& o, Metrics& m)
-        : options(o), metrics(m), cache(o.cache_bytes, m), pool(o.threads) {}
+        : options(o), metrics(m), cache(o.cache_bytes, m), pool(o.threads, lower_priority) {}
 
     TileServiceOptions options;
     Metrics& metrics;
@@ -221,7 +170,7 @@ struct TileService::Impl {
     int pending = 0; // generations queued or running
     int waiting = 0; // requests waiting for a generation
 
-    Pool pool; // last: destroyed (drained and joined) first
+    ThreadPool pool; // last: destroyed (drained and joined) first
 };
 
 TileService::TileService(std::vector<ServedLayer> layers,

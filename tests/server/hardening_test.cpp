@@ -17,6 +17,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <memory>
 #include <mutex>
 #include <thread>
 #include <vector>
@@ -582,40 +583,6 @@ TEST_CASE("request heads are framed exactly: where they end and how long the bod
     CHECK(server::check_request_head("GET / HTTP/1.1\r", limits).state == State::Incomplete);
 }
 
-namespace {
-
-// One response on a keep-alive connection: its head, then Content-Length bytes; "" on timeout.
-std::string read_response(const Raw& r, std::chrono::milliseconds timeout) {
-    std::string out;
-    const auto end = Clock::now() + timeout;
-    char buf[16384];
-    while (Clock::now() < end) {
-        const auto head_end = out.find("\r\n\r\n");
-        if (head_end != std::string::npos) {
-            std::size_t length = 0;
-            const auto cl = out.find("Content-Length: ");
-            if (cl != std::string::npos && cl < head_end) {
-                length = std::stoul(out.substr(cl + 16));
-            }
-            if (out.size() >= head_end + 4 + length) {
-                return out;
-            }
-        }
-        pollfd p{r.fd, POLLIN, 0};
-        if (poll(&p, 1, 20) <= 0) {
-            continue;
-        }
-        const ssize_t n = recv(r.fd, buf, sizeof buf, 0);
-        if (n <= 0) {
-            break;
-        }
-        out.append(buf, static_cast<std::size_t>(n));
-    }
-    return "";
-}
-
-} // namespace
-
 TEST_CASE("max_connections holds for every connection loop together, and a closed connection "
           "frees its slot") {
     auto& f = fixture();
@@ -624,12 +591,12 @@ TEST_CASE("max_connections holds for every connection loop together, and a close
     test::RunningServer s({f.served()}, {}, options);
     const std::string health = "GET /health HTTP/1.1\r\nHost: x\r\n\r\n";
     // Six connections, each known to be open on its loop (the loops take them in turn).
-    std::vector<Raw> open;
+    std::vector<std::unique_ptr<test::KeepAliveConn>> open;
     for (int i = 0; i < 6; ++i) {
-        open.emplace_back(s.port);
-        open.back().send_all(health);
+        open.push_back(std::make_unique<test::KeepAliveConn>(s.port));
         INFO("connection ", i);
-        REQUIRE(status_of(read_response(open.back(), std::chrono::seconds(10))) == 200);
+        REQUIRE(open.back()->send_all(health));
+        REQUIRE(status_of(open.back()->response(false)) == 200);
     }
     // A seventh is refused, whichever loop it goes to.
     for (int k = 0; k < 3; ++k) {
@@ -642,19 +609,16 @@ TEST_CASE("max_connections holds for every connection loop together, and a close
         CHECK(closed);
     }
     // The six still answer.
-    for (auto& r : open) {
-        r.send_all(health);
-        CHECK(status_of(read_response(r, std::chrono::seconds(10))) == 200);
+    for (auto& c : open) {
+        REQUIRE(c->send_all(health));
+        CHECK(status_of(c->response(false)) == 200);
     }
     // Closing one frees a slot (once the server has seen the close).
-    close(open.front().fd);
-    open.front().fd = -1;
+    open.erase(open.begin());
     bool admitted = false;
     for (int attempt = 0; attempt < 250 && !admitted; ++attempt) {
-        Raw again(s.port);
-        again.send_all(health);
-        const std::string answer = read_response(again, std::chrono::seconds(10));
-        admitted = status_of(answer) == 200;
+        test::KeepAliveConn again(s.port);
+        admitted = again.send_all(health) && status_of(again.response(false)) == 200;
         if (!admitted) {
             std::this_thread::sleep_for(std::chrono::milliseconds(20));
         }

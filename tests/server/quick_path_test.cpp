@@ -44,68 +44,7 @@ Fixture& fixture() {
     return f;
 }
 
-// A raw keep-alive connection that reads whole responses, framed by their Content-Length.
-struct Conn {
-    int fd = -1;
-    std::string buffer;
-
-    explicit Conn(int port) : fd(test::connect_loopback(port)) {}
-    ~Conn() { close(fd); }
-    Conn(const Conn&) = delete;
-    Conn& operator=(const Conn&) = delete;
-
-    bool send_all(const std::string& bytes) const {
-        std::size_t off = 0;
-        while (off < bytes.size()) {
-            const ssize_t n = ::send(fd, bytes.data() + off, bytes.size() - off, MSG_NOSIGNAL);
-            if (n <= 0) {
-                return false;
-            }
-            off += static_cast<std::size_t>(n);
-        }
-        return true;
-    }
-    // False when the server closed (or sent nothing for a long while: a hang, not a timing).
-    bool receive() {
-        pollfd p{fd, POLLIN, 0};
-        if (poll(&p, 1, 30000) <= 0) {
-            return false;
-        }
-        char chunk[65536];
-        const ssize_t n = recv(fd, chunk, sizeof chunk, 0);
-        if (n <= 0) {
-            return false;
-        }
-        buffer.append(chunk, static_cast<std::size_t>(n));
-        return true;
-    }
-    // The next response, head and body; `no_body`: the answer to a HEAD. Empty when the
-    // connection closed first.
-    std::string response(bool no_body) {
-        std::size_t end;
-        while ((end = buffer.find("\r\n\r\n")) == std::string::npos) {
-            if (!receive()) {
-                return "";
-            }
-        }
-        const std::string head = buffer.substr(0, end + 4);
-        std::size_t length = 0;
-        const auto at = head.find("\r\nContent-Length: ");
-        if (at != std::string::npos && !no_body) {
-            length = std::stoul(head.substr(at + 18));
-        }
-        while (buffer.size() < end + 4 + length) {
-            if (!receive()) {
-                return "";
-            }
-        }
-        std::string out = buffer.substr(0, end + 4 + length);
-        buffer.erase(0, out.size());
-        return out;
-    }
-    // True once the server has closed the connection with nothing more sent.
-    bool closed_by_server() { return buffer.empty() && !receive() && buffer.empty(); }
-};
+using Conn = test::KeepAliveConn;
 
 std::string
 request(const std::string& method, const std::string& path, const std::string& headers = "") {
