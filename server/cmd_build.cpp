@@ -221,7 +221,7 @@ const Command& build_command() {
              {"dem-size", "P", "DEM tiles are P x P pixels, 256 or 512 (default 512)"},
              {"dem-heights", "H", "DEM tile heights: sea_level (default) or ellipsoid"},
              {"nodata", "V", "raw sample value to treat as nodata, replacing the file's own"},
-             {"threads", "N", "worker threads (default: one per core)"},
+             {"threads", "N", "worker threads (default: one per usable core)"},
              {"resume", "", "continue a build: same parameters, tiles already there are kept"},
              {"force", "", "delete the layer's existing tiles and documents first"},
              {"shard",

@@ -7,6 +7,7 @@
 #include "server/tile_service.hpp"
 #include "tiler/log.hpp"
 #include "tiler/stores/store.hpp"
+#include "tiler/cpus.hpp"
 
 #include <pthread.h>
 #include <signal.h>
@@ -167,7 +168,7 @@ int run(const Args& args) {
     if (args.has("threads")) {
         const long long threads = args.get_int("threads", cfg.server.threads);
         if (threads < 0 || threads > 256) {
-            throw InputError("--threads: expected 0..256 (0: one per core), got " +
+            throw InputError("--threads: expected 0..256 (0: one per usable core), got " +
                              std::to_string(threads));
         }
         cfg.server.threads = static_cast<int>(threads);
@@ -208,8 +209,7 @@ int run(const Args& args) {
                   ".." + std::to_string(s.layer->max_zoom()));
         served.push_back(std::move(s));
     }
-    const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
-    const int threads = cfg.server.threads > 0 ? cfg.server.threads : static_cast<int>(cores);
+    const int threads = cfg.server.threads > 0 ? cfg.server.threads : tiler::usable_cpus();
 
     server::TileServiceOptions tile_options;
     tile_options.cache_bytes = cfg.server.cache_mb << 20;
@@ -257,7 +257,7 @@ const Command& serve_command() {
          "Serve terrain tiles over HTTP.",
          {{"host", "HOST", "address to listen on (default 127.0.0.1, or the config's)"},
           {"port", "PORT", "port to listen on (default 8080; 0 picks a free port)"},
-          {"threads", "N", "tile generation threads (default: one per core)"},
+          {"threads", "N", "tile generation threads (default: one per usable core)"},
           {"web", "DIR", "the viewer's directory (default: web/ of this checkout; 'none': off)"},
           {"nodata", "V", "raw sample value every layer treats as nodata (the config's nodata)"},
           {"store",

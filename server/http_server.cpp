@@ -3,6 +3,7 @@
 #include "server/http_server.hpp"
 
 #include "core/error.hpp"
+#include "tiler/cpus.hpp"
 #include "tiler/dem_tiles.hpp"
 #include "tiler/formats/quantized_mesh.hpp"
 #include "tiler/formats/terrain_tiles.hpp"
@@ -28,6 +29,7 @@
 #include <filesystem>
 #include <fstream>
 #include <mutex>
+#include <optional>
 #include <sstream>
 #include <thread>
 
@@ -54,6 +56,11 @@ thread_local RequestContext t_request;
 // cpp-httplib never compresses a response itself (it would, on every request, and ignores
 // q=0); send_blob compresses documents once per ETag instead.
 thread_local std::string t_accept_encoding;
+// The request's Range header, taken off before cpp-httplib reads the request (take_range):
+// cpp-httplib 0.11.4 cuts every body to the range, error bodies included, and keeps the 200 a
+// handler set, so a client got a 200 with part of a tile. apply_range answers it instead, after
+// routing, for complete 200 answers only.
+thread_local std::string t_range;
 
 std::string json_escape(std::string_view text) {
     std::string out;
@@ -469,6 +476,150 @@ bool equals_ci(std::string_view a, std::string_view b) {
     return true;
 }
 
+// One byte range (RFC 9110 14.1.2): first-last, first- (to the end) or -suffix_length.
+// -1 marks the absent bound.
+struct ByteRange {
+    std::int64_t first = -1;
+    std::int64_t last = -1;
+};
+
+// The single range of a Range value, or nothing when the value is not exactly one byte range
+// (several ranges, another unit, a malformed one): such a Range is ignored.
+std::optional<ByteRange> single_byte_range(std::string_view value) {
+    const auto trim = [](std::string_view v) {
+        while (!v.empty() && (v.front() == ' ' || v.front() == '\t')) {
+            v.remove_prefix(1);
+        }
+        while (!v.empty() && (v.back() == ' ' || v.back() == '\t')) {
+            v.remove_suffix(1);
+        }
+        return v;
+    };
+    value = trim(value);
+    constexpr std::string_view kUnit = "bytes=";
+    if (value.size() < kUnit.size() || !equals_ci(value.substr(0, kUnit.size()), kUnit)) {
+        return std::nullopt;
+    }
+    value = trim(value.substr(kUnit.size()));
+    const std::size_t dash = value.find('-');
+    if (dash == std::string_view::npos || value.find(',') != std::string_view::npos) {
+        return std::nullopt;
+    }
+    // Up to 18 digits: below 2^63, far beyond any body.
+    const auto digits = [](std::string_view v, std::int64_t& out) {
+        if (v.empty() || v.size() > 18) {
+            return false;
+        }
+        out = 0;
+        for (const char c : v) {
+            if (c < '0' || c > '9') {
+                return false;
+            }
+            out = out * 10 + (c - '0');
+        }
+        return true;
+    };
+    ByteRange r;
+    const std::string_view a = trim(value.substr(0, dash)), b = trim(value.substr(dash + 1));
+    if (a.empty()) {
+        if (!digits(b, r.last)) {
+            return std::nullopt;
+        }
+        return r; // a suffix: the last r.last bytes
+    }
+    if (!digits(a, r.first) || (!b.empty() && !digits(b, r.last)) ||
+        (r.last >= 0 && r.last < r.first)) {
+        return std::nullopt;
+    }
+    return r;
+}
+
+// Takes the Range header lines off a framed request (head and body, lines ended by CRLF as
+// the connection loop requires): true, with `without` the request minus those lines and
+// `value` the field's value, when there was one. Several Range lines give an empty value,
+// which apply_range ignores.
+bool take_range(std::string_view request, std::string& value, std::string& without) {
+    const std::size_t head_end = request.find("\r\n\r\n");
+    if (head_end == std::string_view::npos) {
+        return false;
+    }
+    constexpr std::string_view kName = "range:";
+    int found = 0;
+    std::size_t line = request.find("\r\n") + 2; // after the request line
+    std::size_t copied = 0;
+    while (line <= head_end) {
+        const std::size_t end = request.find("\r\n", line);
+        const std::string_view text = request.substr(line, end - line);
+        if (text.size() >= kName.size() && equals_ci(text.substr(0, kName.size()), kName)) {
+            if (++found == 1) {
+                without.reserve(request.size());
+            }
+            without.append(request.substr(copied, line - copied));
+            copied = end + 2;
+            value = text.substr(kName.size(), 1024);
+        }
+        line = end + 2;
+    }
+    if (found == 0) {
+        return false;
+    }
+    without.append(request.substr(copied));
+    if (found > 1) {
+        value.clear();
+    }
+    return true;
+}
+
+// Answers t_range (the request's Range, taken off before routing) on a complete 200: one
+// satisfiable byte range gives 206 with that part of the body and its Content-Range, a range
+// starting past the end 416 with Content-Range "bytes */length". Everything else gets the whole
+// answer, as RFC 9110 allows: other statuses (errors, 304), bodies streamed by cpp-httplib
+// (files), several ranges, a malformed value, and an If-Range that is not the answer's ETag.
+void apply_range(const httplib::Request& req, httplib::Response& res) {
+    if (t_range.empty() || res.status != 200 || res.body.empty()) {
+        return;
+    }
+    const std::optional<ByteRange> r = single_byte_range(t_range);
+    if (!r) {
+        return;
+    }
+    if (req.has_header("If-Range")) {
+        // Strong comparison: a weak tag or a date never matches (RFC 9110 13.1.5).
+        const std::string etag = res.get_header_value("ETag");
+        if (etag.empty() || etag.front() != '"' || req.get_header_value("If-Range") != etag) {
+            return;
+        }
+    }
+    const auto size = static_cast<std::int64_t>(res.body.size());
+    std::int64_t first = r->first, last = r->last;
+    if (first < 0) {
+        first = size - std::min(last, size); // a suffix
+        last = size - 1;
+    } else if (last < 0 || last >= size) {
+        last = size - 1;
+    }
+    res.headers.erase("Content-Length");
+    if (first >= size) {
+        // Unsatisfiable: starts past the end, or an empty suffix. The error replaces the
+        // answer's own headers.
+        const std::string length = std::to_string(size);
+        for (const char* name : {"Content-Type", "ETag", "Cache-Control", "Vary"}) {
+            res.headers.erase(name);
+        }
+        send_error(res, 416, "the range starts past the end of the " + length + " bytes");
+        res.set_header("Content-Range", "bytes */" + length);
+        res.set_header("Content-Length", std::to_string(res.body.size()));
+        return;
+    }
+    res.status = 206;
+    res.set_header("Content-Range",
+                   "bytes " + std::to_string(first) + "-" + std::to_string(last) + "/" +
+                       std::to_string(size));
+    res.body = res.body.substr(static_cast<std::size_t>(first),
+                               static_cast<std::size_t>(last - first + 1));
+    res.set_header("Content-Length", std::to_string(res.body.size()));
+}
+
 // A request the connection loop may answer itself, read from its framed bytes: a GET or HEAD
 // of /{layer}/{z}/{x}/{y}.{glb|drc} over HTTP/1.1, in a plain target (unreserved characters
 // only, so cpp-httplib's decoding would leave it as it is and bad_path would accept it), with no
@@ -746,8 +897,7 @@ struct HttpServer::Impl {
         };
         // One connection loop per core (up to 4): cached tiles are answered on the loops'
         // threads, so one loop alone would leave the other cores to the clients.
-        const int loops = static_cast<int>(
-            std::clamp<unsigned>(std::thread::hardware_concurrency(), 1u, kMaxLoops));
+        const int loops = std::clamp(tiler::usable_cpus(), 1, static_cast<int>(kMaxLoops));
         connections =
             std::make_unique<Connections>(capped,
                                           std::max(2, options.http_threads) + tiles.max_waiting(),
@@ -759,6 +909,13 @@ struct HttpServer::Impl {
 
     Reply answer(std::string_view request, const Peer& peer, bool last) {
         Reply reply;
+        // Range is answered by apply_range after routing, so cpp-httplib must not see it: it
+        // would answer 416 to a unit it does not know, which RFC 9110 says to ignore.
+        std::string without_range;
+        t_range.clear();
+        if (take_range(request, t_range, without_range)) {
+            request = without_range;
+        }
         MemoryStream strm(request, peer, reply.bytes);
         bool closed = false;
         bool ok = false;
@@ -828,7 +985,8 @@ struct HttpServer::Impl {
             vary_origin = true;
         }
         if (!options.cors_origins.empty()) {
-            out += "Access-Control-Expose-Headers: ETag, Content-Length, Retry-After\r\n";
+            out += "Access-Control-Expose-Headers: ETag, Content-Length, Content-Range, "
+                   "Retry-After\r\n";
         }
         out += "Cache-Control: ";
         out += kTileCacheControl;
@@ -886,8 +1044,8 @@ struct HttpServer::Impl {
     std::string refuse(int status, const std::string& why, const Peer& peer) {
         metrics.record_request(status == 503 ? "refused" : "malformed", status, 0.0);
         log::write_queued(log::Level::Info,
-                          peer.ip + ":" + std::to_string(peer.port) + " " +
-                              std::to_string(status) + " " + why + "; connection closed");
+                          peer.ip + ":" + std::to_string(peer.port) + " " + std::to_string(status) +
+                              " " + why + "; connection closed");
         const std::string body = "{\"error\":\"" + json_escape(why) + "\"}\n";
         std::string text =
             "HTTP/1.1 " + std::to_string(status) + " " + status_text(status) +
@@ -981,7 +1139,8 @@ struct HttpServer::Impl {
             res.set_header("Vary", "Origin");
         }
         if (!options.cors_origins.empty()) {
-            res.set_header("Access-Control-Expose-Headers", "ETag, Content-Length, Retry-After");
+            res.set_header("Access-Control-Expose-Headers",
+                           "ETag, Content-Length, Content-Range, Retry-After");
         }
     }
 
@@ -1170,6 +1329,10 @@ struct HttpServer::Impl {
                 }
                 return httplib::Server::HandlerResponse::Handled;
             }));
+
+        // After routing, before anything is written: the Range taken off the request.
+        server.set_post_routing_handler(
+            [](const httplib::Request& req, httplib::Response& res) { apply_range(req, res); });
 
         server.set_logger([this](const httplib::Request& req, const httplib::Response& res) {
             const auto now = std::chrono::steady_clock::now();

@@ -192,6 +192,77 @@ TEST_CASE("a matching If-None-Match gets 304 with no body, a stale one the tile"
     }
 }
 
+TEST_CASE("a byte range gets 206 with that part, past the end 416, anything else the whole") {
+    auto& f = fixture();
+    RunningServer s({f.served()});
+    auto c = s.client();
+    const std::string url = tile_url(f.inside);
+    auto whole = c.Get(url);
+    REQUIRE(whole);
+    REQUIRE(whole->status == 200);
+    const std::string& body = whole->body;
+    const std::string size = std::to_string(body.size());
+    const std::string etag = whole->get_header_value("ETag");
+    REQUIRE(body.size() > 40);
+    struct Case {
+        std::string range;
+        std::size_t first, length;
+    };
+    for (const Case& k : {Case{"bytes=0-9", 0, 10},
+                          Case{"bytes=-7", body.size() - 7, 7},
+                          Case{"bytes=20-", 20, body.size() - 20},
+                          Case{"bytes=5-99999999", 5, body.size() - 5},
+                          Case{"BYTES=3-3", 3, 1}}) {
+        INFO(k.range);
+        auto part = c.Get(url, {{"Range", k.range}});
+        REQUIRE(part);
+        CHECK(part->status == 206);
+        CHECK(part->body == body.substr(k.first, k.length));
+        CHECK(part->get_header_value("Content-Range") ==
+              "bytes " + std::to_string(k.first) + "-" + std::to_string(k.first + k.length - 1) +
+                  "/" + size);
+        CHECK(part->get_header_value("ETag") == etag);
+    }
+    // Starts past the end: 416 naming the length, with a JSON error.
+    for (const std::string& range : {"bytes=" + size + "-", std::string("bytes=-0")}) {
+        auto past = c.Get(url, {{"Range", range}});
+        REQUIRE(past);
+        CHECK(past->status == 416);
+        CHECK(past->get_header_value("Content-Range") == "bytes */" + size);
+        CHECK(past->get_header_value("Content-Type") == "application/json");
+        CHECK(past->body.find("past the end") != std::string::npos);
+    }
+    // Ignored, the whole tile as 200: several ranges, another unit, a stale If-Range.
+    const std::vector<httplib::Headers> whole_cases = {
+        {{"Range", "bytes=0-3,10-20"}},
+        {{"Range", "items=0-3"}},
+        {{"Range", "bytes=0-9"}, {"If-Range", "\"0000000000000000-0\""}},
+    };
+    for (const auto& headers : whole_cases) {
+        auto got = c.Get(url, headers);
+        REQUIRE(got);
+        CHECK(got->status == 200);
+        CHECK(got->body == body);
+        CHECK(!got->has_header("Content-Range"));
+    }
+    auto current = c.Get(url, {{"Range", "bytes=0-9"}, {"If-Range", etag}});
+    REQUIRE(current);
+    CHECK(current->status == 206);
+    CHECK(current->body == body.substr(0, 10));
+    // An error keeps its whole body, and a document its ranges too.
+    auto error = c.Get(tile_url(f.outside), {{"Range", "bytes=0-3"}});
+    REQUIRE(error);
+    CHECK(error->status == 404);
+    CHECK(!error->has_header("Content-Range"));
+    CHECK(nlohmann::json::parse(error->body).contains("error"));
+    auto doc = c.Get("/hills/tileset.json");
+    REQUIRE(doc);
+    auto doc_part = c.Get("/hills/tileset.json", {{"Range", "bytes=0-0"}});
+    REQUIRE(doc_part);
+    CHECK(doc_part->status == 206);
+    CHECK(doc_part->body == doc->body.substr(0, 1));
+}
+
 TEST_CASE("on-demand, SQLite-store and directory-store tiles are the same bytes") {
     auto& f = fixture();
     const std::vector<std::pair<tiler::TileId, tiler::Format>> wanted = {

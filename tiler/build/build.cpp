@@ -12,6 +12,7 @@
 #include "tiler/json_number.hpp"
 #include "tiler/log.hpp"
 #include "tiler/stores/store.hpp"
+#include "tiler/cpus.hpp"
 
 #include <algorithm>
 #include <charconv>
@@ -673,7 +674,7 @@ void check_options(const BuildOptions& o) {
     validate_layer_name(o.layer.name);
     if (o.threads < 0 || o.threads > 1024) {
         throw InputError("build: --threads " + std::to_string(o.threads) +
-                         ": expected 1..1024 (or 0 for one per core)");
+                         ": expected 1..1024 (or 0 for one per usable core)");
     }
     if (o.formats.empty()) {
         throw InputError(
@@ -890,7 +891,7 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
     }
     const int threads = o.threads > 0
                             ? o.threads
-                            : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+                            : usable_cpus();
     log::info("build: " + std::to_string(summary.planned) + " tiles, zoom " +
               std::to_string(layer->min_zoom()) + ".." + std::to_string(layer->max_zoom()) +
               (terrain ? " (terrain from zoom 0)" : "") + ", " + std::to_string(threads) +
