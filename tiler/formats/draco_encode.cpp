@@ -144,10 +144,43 @@ GridVertices to_grid(const TileRaster& raster, const std::vector<Ecef>& world) {
 
 Verdict snapped_error(const TileRaster& raster, const TileMesh& mesh, const GridVertices& g) {
     const core::HeightGrid& grid = raster.grid;
-    const std::size_t count = static_cast<std::size_t>(grid.width) * grid.height;
+    const int width = grid.width, height = grid.height;
+    const std::size_t count = static_cast<std::size_t>(width) * height;
     constexpr double kEdge = -1e-9; // barycentric slack: on an edge counts as inside
     std::vector<double> outside(count, std::numeric_limits<double>::infinity());
     std::vector<double> error(count, 0.0);
+    const auto lo3 = [](double u, double v, double w) { return std::min({u, v, w}); };
+    const auto hi3 = [](double u, double v, double w) { return std::max({u, v, w}); };
+    // Sample (x, y) against triangle (a, b, c): inside (within the slack) it keeps the worst
+    // error of the triangles holding it; outside all of them, the error on the nearest one.
+    const auto visit = [&](const std::array<double, 3>& a,
+                           const std::array<double, 3>& b,
+                           const std::array<double, 3>& c,
+                           double det,
+                           int x,
+                           int y) {
+        const std::size_t k = static_cast<std::size_t>(y) * width + x;
+        if (!grid.is_valid(x, y)) {
+            return;
+        }
+        const double la = ((b[0] - x) * (c[1] - y) - (c[0] - x) * (b[1] - y)) / det;
+        const double lb = ((c[0] - x) * (a[1] - y) - (a[0] - x) * (c[1] - y)) / det;
+        const double lc = 1 - la - lb;
+        const double e = std::abs(la * a[2] + lb * b[2] + lc * c[2] - grid.at(x, y));
+        const double out = std::max(0.0, -lo3(la, lb, lc) + kEdge);
+        if (out == 0) {
+            error[k] = outside[k] == 0 ? std::max(error[k], e) : e;
+            outside[k] = 0;
+        } else if (out < outside[k]) {
+            outside[k] = out;
+            error[k] = e;
+        }
+    };
+    // Pass 1, every sample a triangle holds: row by row, over the x-extent of the triangle
+    // within a band of +-kBand around the row, widened by kBand. A sample within the slack of
+    // the triangle lies less than 1e-5 pixels from it (the slack times the triangle's height),
+    // so the band finds it.
+    constexpr double kBand = 1e-3;
     for (std::size_t t = 0; t < mesh.triangle_count(); ++t) {
         const auto& a = g[mesh.triangles[3 * t]];
         const auto& b = g[mesh.triangles[3 * t + 1]];
@@ -156,29 +189,79 @@ Verdict snapped_error(const TileRaster& raster, const TileMesh& mesh, const Grid
         if (det == 0) {
             continue; // collapsed (all of a pole row): its samples are covered by neighbours
         }
-        const auto lo = [](double u, double v, double w) { return std::min({u, v, w}); };
-        const auto hi = [](double u, double v, double w) { return std::max({u, v, w}); };
-        const int x0 = std::max(0, int(std::floor(lo(a[0], b[0], c[0]))) - 1);
-        const int x1 = std::min(grid.width - 1, int(std::ceil(hi(a[0], b[0], c[0]))) + 1);
-        const int y0 = std::max(0, int(std::floor(lo(a[1], b[1], c[1]))) - 1);
-        const int y1 = std::min(grid.height - 1, int(std::ceil(hi(a[1], b[1], c[1]))) + 1);
+        const std::array<double, 3>* corner[3] = {&a, &b, &c};
+        const int y0 = std::max(0, static_cast<int>(std::ceil(lo3(a[1], b[1], c[1]) - kBand)));
+        const int y1 =
+            std::min(height - 1, static_cast<int>(std::floor(hi3(a[1], b[1], c[1]) + kBand)));
+        for (int y = y0; y <= y1; ++y) {
+            const double band_lo = y - kBand, band_hi = y + kBand;
+            double x_lo = std::numeric_limits<double>::infinity(), x_hi = -x_lo;
+            for (int i = 0; i < 3; ++i) {
+                const auto& p = *corner[i];
+                const auto& q = *corner[(i + 1) % 3];
+                if (p[1] >= band_lo && p[1] <= band_hi) {
+                    x_lo = std::min(x_lo, p[0]);
+                    x_hi = std::max(x_hi, p[0]);
+                }
+                for (const double yb : {band_lo, band_hi}) {
+                    if ((p[1] < yb && yb < q[1]) || (q[1] < yb && yb < p[1])) {
+                        const double x = p[0] + (yb - p[1]) * (q[0] - p[0]) / (q[1] - p[1]);
+                        x_lo = std::min(x_lo, x);
+                        x_hi = std::max(x_hi, x);
+                    }
+                }
+            }
+            if (!(x_lo <= x_hi)) {
+                continue;
+            }
+            const int x0 = std::max(0, static_cast<int>(std::ceil(x_lo - kBand)));
+            const int x1 = std::min(width - 1, static_cast<int>(std::floor(x_hi + kBand)));
+            for (int x = x0; x <= x1; ++x) {
+                visit(a, b, c, det, x, y);
+            }
+        }
+    }
+    // Pass 2, the samples pass 1 found in no triangle (border samples a snapped vertex moved a
+    // hair away from): each anew against every triangle within a pixel of it, the nearest one
+    // deciding (or one holding it after all). Triangles with no such sample within a pixel are
+    // skipped by a prefix count.
+    std::vector<std::uint32_t> uncovered(static_cast<std::size_t>(width + 1) * (height + 1), 0);
+    const auto at = [&](int x, int y) -> std::uint32_t& {
+        return uncovered[static_cast<std::size_t>(y) * (width + 1) + x];
+    };
+    bool any = false;
+    for (int y = 0; y < height; ++y) {
+        for (int x = 0; x < width; ++x) {
+            const std::size_t k = static_cast<std::size_t>(y) * width + x;
+            const bool open = grid.is_valid(x, y) && outside[k] != 0;
+            if (open) {
+                outside[k] = std::numeric_limits<double>::infinity();
+                error[k] = 0;
+                any = true;
+            }
+            at(x + 1, y + 1) = (open ? 1 : 0) + at(x, y + 1) + at(x + 1, y) - at(x, y);
+        }
+    }
+    for (std::size_t t = 0; any && t < mesh.triangle_count(); ++t) {
+        const auto& a = g[mesh.triangles[3 * t]];
+        const auto& b = g[mesh.triangles[3 * t + 1]];
+        const auto& c = g[mesh.triangles[3 * t + 2]];
+        const double det = (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1]);
+        if (det == 0) {
+            continue;
+        }
+        const int x0 = std::max(0, int(std::floor(lo3(a[0], b[0], c[0]))) - 1);
+        const int x1 = std::min(width - 1, int(std::ceil(hi3(a[0], b[0], c[0]))) + 1);
+        const int y0 = std::max(0, int(std::floor(lo3(a[1], b[1], c[1]))) - 1);
+        const int y1 = std::min(height - 1, int(std::ceil(hi3(a[1], b[1], c[1]))) + 1);
+        if (x0 > x1 || y0 > y1 ||
+            at(x1 + 1, y1 + 1) - at(x0, y1 + 1) - at(x1 + 1, y0) + at(x0, y0) == 0) {
+            continue;
+        }
         for (int y = y0; y <= y1; ++y) {
             for (int x = x0; x <= x1; ++x) {
-                const std::size_t k = static_cast<std::size_t>(y) * grid.width + x;
-                if (!grid.is_valid(x, y)) {
-                    continue;
-                }
-                const double la = ((b[0] - x) * (c[1] - y) - (c[0] - x) * (b[1] - y)) / det;
-                const double lb = ((c[0] - x) * (a[1] - y) - (a[0] - x) * (c[1] - y)) / det;
-                const double lc = 1 - la - lb;
-                const double e = std::abs(la * a[2] + lb * b[2] + lc * c[2] - grid.at(x, y));
-                const double out = std::max(0.0, -lo(la, lb, lc) + kEdge);
-                if (out == 0) {
-                    error[k] = outside[k] == 0 ? std::max(error[k], e) : e;
-                    outside[k] = 0;
-                } else if (out < outside[k]) {
-                    outside[k] = out;
-                    error[k] = e;
+                if (outside[static_cast<std::size_t>(y) * width + x] != 0) {
+                    visit(a, b, c, det, x, y);
                 }
             }
         }
@@ -187,8 +270,8 @@ Verdict snapped_error(const TileRaster& raster, const TileMesh& mesh, const Grid
     for (std::size_t k = 0; k < count; ++k) {
         if (error[k] > verdict.max_error) {
             verdict.max_error = error[k];
-            verdict.column = static_cast<int>(k % grid.width);
-            verdict.row = static_cast<int>(k / grid.width);
+            verdict.column = static_cast<int>(k % width);
+            verdict.row = static_cast<int>(k / width);
         }
     }
     return verdict;

@@ -309,6 +309,7 @@ mesh_pixel_tile(const PixelTile& t, const ErrorBudget& budget, bool drop_voids, 
     // Vertices by key (column, row) in the block: -1 and w are the west and east border lines,
     // -1 and h the north and south ones.
     TileMesh out;
+    bool dropped = false; // a triangle was left out (voids)
     std::map<std::pair<int, int>, core::Index> index;
     const auto is_line = [w, h](int c, int r) { return c < 0 || c >= w || r < 0 || r >= h; };
     const auto value_of = [&](int c, int r) -> Value {
@@ -392,6 +393,8 @@ mesh_pixel_tile(const PixelTile& t, const ErrorBudget& budget, bool drop_voids, 
             if (!drop_voids ||
                 holds_valid_sample(grid, mesh.points[a], mesh.points[b], mesh.points[c])) {
                 triangle(id[a], id[b], id[c]);
+            } else {
+                dropped = true;
             }
         }
         for (auto& side : inner) {
@@ -486,11 +489,17 @@ mesh_pixel_tile(const PixelTile& t, const ErrorBudget& budget, bool drop_voids, 
             kept.insert(kept.end(),
                         out.triangles.begin() + static_cast<std::ptrdiff_t>(e),
                         out.triangles.begin() + static_cast<std::ptrdiff_t>(e + 3));
+        } else {
+            dropped = true;
         }
     }
     out.triangles = std::move(kept);
     drop_unused_vertices(out);
-    split_nonmanifold_vertices(out);
+    // The block's triangulation zipped to the border lines is a disk; only dropped triangles
+    // can leave a vertex where two fans touch.
+    if (dropped) {
+        split_nonmanifold_vertices(out);
+    }
     return out;
 }
 

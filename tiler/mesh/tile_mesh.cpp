@@ -60,18 +60,21 @@ TileMesh to_tile_mesh(const TileRaster& raster, const core::Mesh& mesh, bool dro
         out.add(f.x0 + p.x * f.dx, f.y0 - p.y * f.dy, mesh.z[v], border);
     }
     out.triangles.reserve(mesh.triangles.size());
+    bool dropped = false;
     for (std::size_t t = 0; t < mesh.triangle_count(); ++t) {
         const core::Index a = mesh.triangles[3 * t], b = mesh.triangles[3 * t + 1],
                           c = mesh.triangles[3 * t + 2];
         if (drop_voids &&
             !holds_valid_sample(raster.grid, mesh.points[a], mesh.points[b], mesh.points[c])) {
+            dropped = true;
             continue;
         }
         // Core winds counter-clockwise in (column, row) with rows running south: clockwise seen
         // from above, so two indices swap.
         out.triangles.insert(out.triangles.end(), {a, c, b});
     }
-    if (drop_voids) {
+    if (dropped) {
+        // Only dropped triangles can leave a vertex where two fans touch.
         drop_unused_vertices(out);
         split_nonmanifold_vertices(out);
     }
