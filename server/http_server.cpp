@@ -974,9 +974,9 @@ struct HttpServer::Impl {
         bool vary_origin = false;
         if (cors_any) {
             out += "Access-Control-Allow-Origin: *\r\n";
-        } else if (!q.origin.empty()) {
+        } else if (!options.cors_origins.empty()) {
             for (const auto& o : options.cors_origins) {
-                if (o == q.origin) {
+                if (!q.origin.empty() && o == q.origin) {
                     out += "Access-Control-Allow-Origin: ";
                     out += o;
                     out += "\r\n";
@@ -1129,13 +1129,17 @@ struct HttpServer::Impl {
         }
         if (any) {
             res.set_header("Access-Control-Allow-Origin", "*");
-        } else if (req.has_header("Origin")) {
-            const std::string origin = req.get_header_value("Origin");
-            for (const auto& o : options.cors_origins) {
-                if (o == origin) {
-                    res.set_header("Access-Control-Allow-Origin", origin);
+        } else if (!options.cors_origins.empty()) {
+            if (req.has_header("Origin")) {
+                const std::string origin = req.get_header_value("Origin");
+                for (const auto& o : options.cors_origins) {
+                    if (o == origin) {
+                        res.set_header("Access-Control-Allow-Origin", origin);
+                    }
                 }
             }
+            // With a list of origins every answer depends on Origin, one asked without it too:
+            // a shared cache must not give that one to a page of a listed origin.
             res.set_header("Vary", "Origin");
         }
         if (!options.cors_origins.empty()) {
@@ -1531,9 +1535,15 @@ struct HttpServer::Impl {
                   tiler::media_type(tiler::Format::Terrain),
                   kTileCacheControl,
                   &metrics);
-        // The extensions sent depend on Accept, the coding on Accept-Encoding.
+        // The extensions sent depend on Accept, the coding on Accept-Encoding (and, with a
+        // list of CORS origins, the answer on Origin: cors() said so).
+        bool by_origin = false;
+        for (auto [it, end] = res.headers.equal_range("Vary"); it != end; ++it) {
+            by_origin = by_origin || it->second == "Origin";
+        }
         res.headers.erase("Vary");
-        res.set_header("Vary", "Accept, Accept-Encoding");
+        res.set_header("Vary",
+                       by_origin ? "Origin, Accept, Accept-Encoding" : "Accept, Accept-Encoding");
     }
 
     void serve_terrain3d(const httplib::Request& req, httplib::Response& res) {

@@ -1,8 +1,8 @@
 // Hostile configs: nesting 100,000 deep, hosts that are not addresses, NUL bytes in paths,
 // the nodata field; each gets one clear line naming the file and the JSON pointer.
 #include "config/config.hpp"
-#include "core/error.hpp"
 #include "config_util.hpp"
+#include "core/error.hpp"
 #include "server_fixture.hpp"
 
 #include <doctest/doctest.h>

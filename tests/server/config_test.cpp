@@ -1,8 +1,8 @@
 // Configuration parsing and validation: defaults, relative paths, and every problem of a file
 // reported together with its JSON pointer.
 #include "config/config.hpp"
-#include "core/error.hpp"
 #include "config_util.hpp"
+#include "core/error.hpp"
 #include "server_fixture.hpp"
 
 #include <doctest/doctest.h>

@@ -491,6 +491,29 @@ TEST_CASE("CORS answers only the configured origins when '*' is not configured")
     REQUIRE(other);
     CHECK(other->status == 200);
     CHECK(!other->has_header("Access-Control-Allow-Origin"));
+    // Every answer varies by Origin, one asked without it too (a shared cache must not hand it
+    // to a listed origin's page): documents, tiles from a worker and from the connection loop.
+    const auto varies = [](const httplib::Result& r, const std::string& name) {
+        for (auto [it, end] = r->headers.equal_range("Vary"); it != end; ++it) {
+            std::stringstream list(it->second);
+            for (std::string v; std::getline(list, v, ',');) {
+                v.erase(0, v.find_first_not_of(' '));
+                if (v == name) {
+                    return true;
+                }
+            }
+        }
+        return false;
+    };
+    for (const std::string& url :
+         {std::string("/layers"), tile_url(f.inside), tile_url(f.inside)}) {
+        INFO(url);
+        auto plain = c.Get(url);
+        REQUIRE(plain);
+        CHECK(plain->status == 200);
+        CHECK(!plain->has_header("Access-Control-Allow-Origin"));
+        CHECK(varies(plain, "Origin"));
+    }
 }
 
 namespace {

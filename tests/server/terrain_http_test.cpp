@@ -133,6 +133,28 @@ TEST_CASE("the metadata of the two root tiles lists, level by level, what layer.
     }
 }
 
+TEST_CASE("with a list of CORS origins a terrain tile also varies by Origin") {
+    auto& f = fixture();
+    server::HttpOptions http;
+    http.cors_origins = {"https://maps.example.com"};
+    RunningServer server({{f.layer, {tiler::Format::Terrain}, nullptr}}, {}, http);
+    auto c = server.client();
+    const auto r = f.layer->tiles_at(f.layer->max_zoom());
+    const tiler::TileId id{f.layer->max_zoom(), r.x0, r.y0};
+    for (const bool with_origin : {true, false}) {
+        CAPTURE(with_origin);
+        httplib::Headers h{{"Accept-Encoding", "gzip"}};
+        if (with_origin) {
+            h.emplace("Origin", "https://maps.example.com");
+        }
+        auto res = c.Get(terrain_url(id).c_str(), h);
+        REQUIRE(res);
+        REQUIRE(res->status == 200);
+        CHECK(res->get_header_value("Vary") == "Origin, Accept, Accept-Encoding");
+        CHECK(res->has_header("Access-Control-Allow-Origin") == with_origin);
+    }
+}
+
 TEST_CASE("a terrain tile carries exactly the extensions its Accept header names, gzipped, "
           "with Vary: Accept") {
     auto& f = fixture();
