@@ -5,9 +5,9 @@
 #include "server/http_server.hpp"
 #include "server/metrics.hpp"
 #include "server/tile_service.hpp"
+#include "tiler/cpus.hpp"
 #include "tiler/log.hpp"
 #include "tiler/stores/store.hpp"
-#include "tiler/cpus.hpp"
 
 #include <pthread.h>
 #include <signal.h>

@@ -573,10 +573,13 @@ bool take_range(std::string_view request, std::string& value, std::string& witho
 // Answers t_range (the request's Range, taken off before routing) on a complete 200: one
 // satisfiable byte range gives 206 with that part of the body and its Content-Range, a range
 // starting past the end 416 with Content-Range "bytes */length". Everything else gets the whole
-// answer, as RFC 9110 allows: other statuses (errors, 304), bodies streamed by cpp-httplib
-// (files), several ranges, a malformed value, and an If-Range that is not the answer's ETag.
+// answer, as RFC 9110 allows: methods other than GET (14.2: HEAD too), other statuses (errors,
+// 304), bodies streamed by cpp-httplib (files), compressed documents (their codings share one
+// ETag, so a range resumed under another Accept-Encoding would splice two codings), several
+// ranges, a malformed value, and an If-Range that is not the answer's ETag.
 void apply_range(const httplib::Request& req, httplib::Response& res) {
-    if (t_range.empty() || res.status != 200 || res.body.empty()) {
+    if (t_range.empty() || req.method != "GET" || res.status != 200 || res.body.empty() ||
+        res.has_header("Content-Encoding")) {
         return;
     }
     const std::optional<ByteRange> r = single_byte_range(t_range);
@@ -603,10 +606,13 @@ void apply_range(const httplib::Request& req, httplib::Response& res) {
         // Unsatisfiable: starts past the end, or an empty suffix. The error replaces the
         // answer's own headers.
         const std::string length = std::to_string(size);
-        for (const char* name : {"Content-Type", "ETag", "Cache-Control", "Vary"}) {
+        for (const char* name : {"Content-Type", "ETag", "Cache-Control"}) {
             res.headers.erase(name);
         }
-        send_error(res, 416, "the range starts past the end of the " + length + " bytes");
+        send_error(res,
+                   416,
+                   r->first < 0 ? "the range asks for the last 0 bytes"
+                                : "the range starts past the end of the " + length + " bytes");
         res.set_header("Content-Range", "bytes */" + length);
         res.set_header("Content-Length", std::to_string(res.body.size()));
         return;

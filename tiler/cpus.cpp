@@ -6,6 +6,7 @@
 #include <cctype>
 #include <charconv>
 #include <cstdint>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -58,62 +59,6 @@ int tightest(std::string dir, const std::string& root, const Limit& limit) {
     }
 }
 
-// The quota of this process's cgroups, from /proc/self/cgroup: "0::/path" (v2) or
-// "N:...cpu...:/path" (v1, the cpu controller's line). 0 when there is none or nothing reads.
-int cgroup_cpus() {
-    std::ifstream in("/proc/self/cgroup");
-    int best = 0;
-    const auto take = [&best](int cpus) {
-        if (cpus > 0 && (best == 0 || cpus < best)) {
-            best = cpus;
-        }
-    };
-    for (std::string line; std::getline(in, line);) {
-        const std::size_t a = line.find(':'), b = line.find(':', a + 1);
-        if (a == std::string::npos || b == std::string::npos) {
-            continue;
-        }
-        const std::string controllers = line.substr(a + 1, b - a - 1);
-        std::string path = line.substr(b + 1);
-        // Inside a container the path may name the host's hierarchy, which is mounted at the
-        // root there: a directory that does not exist falls back to the mount's root.
-        if (path.empty() || path == "/") {
-            path.clear();
-        }
-        if (controllers.empty()) {
-            // cgroup v2 alone is mounted at /sys/fs/cgroup; beside v1 (hybrid) at .../unified.
-            const std::string root = std::ifstream("/sys/fs/cgroup/cgroup.controllers")
-                                         ? "/sys/fs/cgroup"
-                                         : "/sys/fs/cgroup/unified";
-            std::string dir = root + path;
-            if (!std::ifstream(dir + "/cpu.max")) {
-                dir = root;
-            }
-            take(tightest(dir, root, [](const std::string& d) {
-                return cpus_of_cpu_max(read_small(d + "/cpu.max"));
-            }));
-        } else {
-            std::stringstream list(controllers);
-            for (std::string c; std::getline(list, c, ',');) {
-                if (c != "cpu") {
-                    continue;
-                }
-                for (const std::string root : {"/sys/fs/cgroup/cpu", "/sys/fs/cgroup/cpu,cpuacct"}) {
-                    std::string dir = root + path;
-                    if (!std::ifstream(dir + "/cpu.cfs_quota_us")) {
-                        dir = root;
-                    }
-                    take(tightest(dir, root, [](const std::string& d) {
-                        return cpus_of_cfs(read_small(d + "/cpu.cfs_quota_us"),
-                                           read_small(d + "/cpu.cfs_period_us"));
-                    }));
-                }
-            }
-        }
-    }
-    return best;
-}
-
 } // namespace
 
 int cpus_of_cpu_max(std::string_view cpu_max) {
@@ -122,7 +67,8 @@ int cpus_of_cpu_max(std::string_view cpu_max) {
         return 0;
     }
     std::int64_t quota = 0, period = 0;
-    if (!parse_int(cpu_max.substr(0, space), quota) || !parse_int(cpu_max.substr(space + 1), period)) {
+    if (!parse_int(cpu_max.substr(0, space), quota) ||
+        !parse_int(cpu_max.substr(space + 1), period)) {
         return 0; // "max 100000" (no limit), or not a cpu.max value
     }
     return quota_cpus(quota, period);
@@ -136,6 +82,66 @@ int cpus_of_cfs(std::string_view quota_us, std::string_view period_us) {
     return quota_cpus(quota, period);
 }
 
+int cgroup_quota_cpus(std::string_view proc_self_cgroup, const std::string& cgroup_root) {
+    int best = 0;
+    const auto take = [&best](int cpus) {
+        if (cpus > 0 && (best == 0 || cpus < best)) {
+            best = cpus;
+        }
+    };
+    const auto is_dir = [](const std::string& d) {
+        std::error_code ec;
+        return std::filesystem::is_directory(d, ec);
+    };
+    std::stringstream lines{std::string(proc_self_cgroup)};
+    for (std::string line; std::getline(lines, line);) {
+        const std::size_t a = line.find(':');
+        const std::size_t b = a == std::string::npos ? a : line.find(':', a + 1);
+        if (b == std::string::npos) {
+            continue;
+        }
+        const std::string controllers = line.substr(a + 1, b - a - 1);
+        std::string path = line.substr(b + 1);
+        if (path.empty() || path == "/") {
+            path.clear();
+        }
+        // Inside a container the path may name the host's hierarchy while the container's own
+        // cgroup is mounted at the root: a directory that does not exist falls back to the
+        // mount's root. One that exists is walked up from, limit file or not (under systemd a
+        // slice sets the quota and the service below it has no cpu.max of its own).
+        const auto start = [&](const std::string& root) {
+            return is_dir(root + path) ? root + path : root;
+        };
+        if (controllers.empty()) {
+            // cgroup v2 alone is mounted at the root; beside v1 (hybrid) at unified/.
+            const std::string root = std::ifstream(cgroup_root + "/cgroup.controllers")
+                                         ? cgroup_root
+                                         : cgroup_root + "/unified";
+            take(tightest(start(root), root, [](const std::string& d) {
+                return cpus_of_cpu_max(read_small(d + "/cpu.max"));
+            }));
+            continue;
+        }
+        std::stringstream list(controllers);
+        for (std::string c; std::getline(list, c, ',');) {
+            if (c != "cpu") {
+                continue;
+            }
+            for (const char* mount : {"/cpu", "/cpu,cpuacct"}) {
+                const std::string root = cgroup_root + mount;
+                if (!is_dir(root)) {
+                    continue;
+                }
+                take(tightest(start(root), root, [](const std::string& d) {
+                    return cpus_of_cfs(read_small(d + "/cpu.cfs_quota_us"),
+                                       read_small(d + "/cpu.cfs_period_us"));
+                }));
+            }
+        }
+    }
+    return best;
+}
+
 int usable_cpus() {
     int cpus = static_cast<int>(std::thread::hardware_concurrency());
     cpu_set_t set;
@@ -146,7 +152,10 @@ int usable_cpus() {
             cpus = cpus > 0 ? std::min(cpus, mask) : mask;
         }
     }
-    const int quota = cgroup_cpus();
+    std::ifstream in("/proc/self/cgroup");
+    std::string text;
+    std::getline(in, text, '\0');
+    const int quota = cgroup_quota_cpus(text, "/sys/fs/cgroup");
     if (quota > 0) {
         cpus = cpus > 0 ? std::min(cpus, quota) : quota;
     }

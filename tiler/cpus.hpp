@@ -4,6 +4,7 @@
 // `taskset`/`--cpuset-cpus` (an affinity mask) that is more than the process gets, and threads
 // beyond its share only take turns. Used for every default thread count: the server's generation
 // threads and connection loops, and `build` without --threads.
+#include <string>
 #include <string_view>
 
 namespace tb::tiler {
@@ -19,5 +20,10 @@ int cpus_of_cpu_max(std::string_view cpu_max);
 
 // The same for cgroup v1's cpu.cfs_quota_us and cpu.cfs_period_us (quota -1: no limit).
 int cpus_of_cfs(std::string_view quota_us, std::string_view period_us);
+
+// The tightest quota, in whole CPUs (0: none), of the cgroups a /proc/self/cgroup text names,
+// read from the cgroup file systems mounted under cgroup_root (normally /sys/fs/cgroup): each
+// cgroup's directory and its ancestors up to the mount's root.
+int cgroup_quota_cpus(std::string_view proc_self_cgroup, const std::string& cgroup_root);
 
 } // namespace tb::tiler

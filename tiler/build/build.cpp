@@ -8,11 +8,11 @@
 #include "tiler/formats/terrain_tiles.hpp"
 
 #include "core/error.hpp"
+#include "tiler/cpus.hpp"
 #include "tiler/dem_tiles.hpp"
 #include "tiler/json_number.hpp"
 #include "tiler/log.hpp"
 #include "tiler/stores/store.hpp"
-#include "tiler/cpus.hpp"
 
 #include <algorithm>
 #include <charconv>
@@ -889,9 +889,7 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
             summary.planned += mine(plan.at(i)) ? 1 : 0;
         }
     }
-    const int threads = o.threads > 0
-                            ? o.threads
-                            : usable_cpus();
+    const int threads = o.threads > 0 ? o.threads : usable_cpus();
     log::info("build: " + std::to_string(summary.planned) + " tiles, zoom " +
               std::to_string(layer->min_zoom()) + ".." + std::to_string(layer->max_zoom()) +
               (terrain ? " (terrain from zoom 0)" : "") + ", " + std::to_string(threads) +

@@ -177,10 +177,10 @@ Verdict snapped_error(const TileRaster& raster, const TileMesh& mesh, const Grid
         }
     };
     // Pass 1, every sample a triangle holds: row by row, over the x-extent of the triangle
-    // within a band of +-kBand around the row, widened by kBand. A sample within the slack of
-    // the triangle lies less than 1e-5 pixels from it (the slack times the triangle's height),
-    // so the band finds it.
-    constexpr double kBand = 1e-3;
+    // within a band of +-band around the row, widened by band. A sample within the slack of a
+    // triangle lies at most 1e-9 of the triangle's height outside it (a few 1e-9 of its
+    // extent), so a band of 1e-3 pixels plus 1e-8 of the extent finds it, however far a
+    // vertex lies (a snapped pole can sit far outside the tile).
     for (std::size_t t = 0; t < mesh.triangle_count(); ++t) {
         const auto& a = g[mesh.triangles[3 * t]];
         const auto& b = g[mesh.triangles[3 * t + 1]];
@@ -190,11 +190,14 @@ Verdict snapped_error(const TileRaster& raster, const TileMesh& mesh, const Grid
             continue; // collapsed (all of a pole row): its samples are covered by neighbours
         }
         const std::array<double, 3>* corner[3] = {&a, &b, &c};
-        const int y0 = std::max(0, static_cast<int>(std::ceil(lo3(a[1], b[1], c[1]) - kBand)));
+        const double extent = std::max(hi3(a[0], b[0], c[0]) - lo3(a[0], b[0], c[0]),
+                                       hi3(a[1], b[1], c[1]) - lo3(a[1], b[1], c[1]));
+        const double band = 1e-3 + 1e-8 * extent;
+        const int y0 = std::max(0, static_cast<int>(std::ceil(lo3(a[1], b[1], c[1]) - band)));
         const int y1 =
-            std::min(height - 1, static_cast<int>(std::floor(hi3(a[1], b[1], c[1]) + kBand)));
+            std::min(height - 1, static_cast<int>(std::floor(hi3(a[1], b[1], c[1]) + band)));
         for (int y = y0; y <= y1; ++y) {
-            const double band_lo = y - kBand, band_hi = y + kBand;
+            const double band_lo = y - band, band_hi = y + band;
             double x_lo = std::numeric_limits<double>::infinity(), x_hi = -x_lo;
             for (int i = 0; i < 3; ++i) {
                 const auto& p = *corner[i];
@@ -214,17 +217,19 @@ Verdict snapped_error(const TileRaster& raster, const TileMesh& mesh, const Grid
             if (!(x_lo <= x_hi)) {
                 continue;
             }
-            const int x0 = std::max(0, static_cast<int>(std::ceil(x_lo - kBand)));
-            const int x1 = std::min(width - 1, static_cast<int>(std::floor(x_hi + kBand)));
+            const int x0 = std::max(0, static_cast<int>(std::ceil(x_lo - band)));
+            const int x1 = std::min(width - 1, static_cast<int>(std::floor(x_hi + band)));
             for (int x = x0; x <= x1; ++x) {
                 visit(a, b, c, det, x, y);
             }
         }
     }
     // Pass 2, the samples pass 1 found in no triangle (border samples a snapped vertex moved a
-    // hair away from): each anew against every triangle within a pixel of it, the nearest one
-    // deciding (or one holding it after all). Triangles with no such sample within a pixel are
+    // hair away from): each anew against every triangle within a pixel of it, exactly as one
+    // loop over every triangle's widened bounding box would: the nearest one deciding, or the
+    // worst of those holding it after all. Triangles with no such sample within a pixel are
     // skipped by a prefix count.
+    std::vector<std::uint8_t> open(count, 0);
     std::vector<std::uint32_t> uncovered(static_cast<std::size_t>(width + 1) * (height + 1), 0);
     const auto at = [&](int x, int y) -> std::uint32_t& {
         return uncovered[static_cast<std::size_t>(y) * (width + 1) + x];
@@ -233,13 +238,13 @@ Verdict snapped_error(const TileRaster& raster, const TileMesh& mesh, const Grid
     for (int y = 0; y < height; ++y) {
         for (int x = 0; x < width; ++x) {
             const std::size_t k = static_cast<std::size_t>(y) * width + x;
-            const bool open = grid.is_valid(x, y) && outside[k] != 0;
-            if (open) {
+            open[k] = grid.is_valid(x, y) && outside[k] != 0 ? 1 : 0;
+            if (open[k] != 0) {
                 outside[k] = std::numeric_limits<double>::infinity();
                 error[k] = 0;
                 any = true;
             }
-            at(x + 1, y + 1) = (open ? 1 : 0) + at(x, y + 1) + at(x + 1, y) - at(x, y);
+            at(x + 1, y + 1) = open[k] + at(x, y + 1) + at(x + 1, y) - at(x, y);
         }
     }
     for (std::size_t t = 0; any && t < mesh.triangle_count(); ++t) {
@@ -260,7 +265,7 @@ Verdict snapped_error(const TileRaster& raster, const TileMesh& mesh, const Grid
         }
         for (int y = y0; y <= y1; ++y) {
             for (int x = x0; x <= x1; ++x) {
-                if (outside[static_cast<std::size_t>(y) * width + x] != 0) {
+                if (open[static_cast<std::size_t>(y) * width + x] != 0) {
                     visit(a, b, c, det, x, y);
                 }
             }

@@ -309,7 +309,7 @@ mesh_pixel_tile(const PixelTile& t, const ErrorBudget& budget, bool drop_voids, 
     // Vertices by key (column, row) in the block: -1 and w are the west and east border lines,
     // -1 and h the north and south ones.
     TileMesh out;
-    bool dropped = false; // a triangle was left out (voids)
+    bool dropped = false; // a triangle was left out (voids, or a strip of no width)
     std::map<std::pair<int, int>, core::Index> index;
     const auto is_line = [w, h](int c, int r) { return c < 0 || c >= w || r < 0 || r >= h; };
     const auto value_of = [&](int c, int r) -> Value {
@@ -356,6 +356,7 @@ mesh_pixel_tile(const PixelTile& t, const ErrorBudget& budget, bool drop_voids, 
         if (area == 0) {
             // A strip whose width rounds away in native coordinates (a pixel centre a hair from
             // the border line) covers nothing: left out, it leaves no visible gap.
+            dropped = true;
             return;
         }
         if (area > 0) {

@@ -73,9 +73,11 @@ TileMesh to_tile_mesh(const TileRaster& raster, const core::Mesh& mesh, bool dro
         // from above, so two indices swap.
         out.triangles.insert(out.triangles.end(), {a, c, b});
     }
+    if (drop_voids) {
+        drop_unused_vertices(out);
+    }
     if (dropped) {
         // Only dropped triangles can leave a vertex where two fans touch.
-        drop_unused_vertices(out);
         split_nonmanifold_vertices(out);
     }
     return out;
