@@ -142,6 +142,22 @@ GridVertices to_grid(const TileRaster& raster, const std::vector<Ecef>& world) {
     return g;
 }
 
+// Triangle t of the snapped mesh in grid coordinates (column, row, height), with twice its
+// signed area; det 0 when it has collapsed (all of a pole row): its samples are then covered by
+// its neighbours.
+struct SnappedTriangle {
+    const std::array<double, 3>& a;
+    const std::array<double, 3>& b;
+    const std::array<double, 3>& c;
+    double det;
+};
+SnappedTriangle snapped_triangle(const TileMesh& mesh, const GridVertices& g, std::size_t t) {
+    const auto& a = g[mesh.triangles[3 * t]];
+    const auto& b = g[mesh.triangles[3 * t + 1]];
+    const auto& c = g[mesh.triangles[3 * t + 2]];
+    return {a, b, c, (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1])};
+}
+
 Verdict snapped_error(const TileRaster& raster, const TileMesh& mesh, const GridVertices& g) {
     const core::HeightGrid& grid = raster.grid;
     const int width = grid.width, height = grid.height;
@@ -182,12 +198,9 @@ Verdict snapped_error(const TileRaster& raster, const TileMesh& mesh, const Grid
     // extent), so a band of 1e-3 pixels plus 1e-8 of the extent finds it, however far a
     // vertex lies (a snapped pole can sit far outside the tile).
     for (std::size_t t = 0; t < mesh.triangle_count(); ++t) {
-        const auto& a = g[mesh.triangles[3 * t]];
-        const auto& b = g[mesh.triangles[3 * t + 1]];
-        const auto& c = g[mesh.triangles[3 * t + 2]];
-        const double det = (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1]);
+        const auto [a, b, c, det] = snapped_triangle(mesh, g, t);
         if (det == 0) {
-            continue; // collapsed (all of a pole row): its samples are covered by neighbours
+            continue;
         }
         const std::array<double, 3>* corner[3] = {&a, &b, &c};
         const double extent = std::max(hi3(a[0], b[0], c[0]) - lo3(a[0], b[0], c[0]),
@@ -248,10 +261,7 @@ Verdict snapped_error(const TileRaster& raster, const TileMesh& mesh, const Grid
         }
     }
     for (std::size_t t = 0; any && t < mesh.triangle_count(); ++t) {
-        const auto& a = g[mesh.triangles[3 * t]];
-        const auto& b = g[mesh.triangles[3 * t + 1]];
-        const auto& c = g[mesh.triangles[3 * t + 2]];
-        const double det = (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1]);
+        const auto [a, b, c, det] = snapped_triangle(mesh, g, t);
         if (det == 0) {
             continue;
         }
@@ -323,10 +333,7 @@ points_error(const TileMesh& mesh, const GridVertices& g, const std::vector<Chec
     constexpr double kEdge = -1e-9;
     std::vector<double> error(points.size(), -1);
     for (std::size_t t = 0; t < mesh.triangle_count(); ++t) {
-        const auto& a = g[mesh.triangles[3 * t]];
-        const auto& b = g[mesh.triangles[3 * t + 1]];
-        const auto& c = g[mesh.triangles[3 * t + 2]];
-        const double det = (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1]);
+        const auto [a, b, c, det] = snapped_triangle(mesh, g, t);
         if (det == 0) {
             continue;
         }
