@@ -627,7 +627,7 @@ void apply_range(const httplib::Request& req, httplib::Response& res) {
 }
 
 // A request the connection loop may answer itself, read from its framed bytes: a GET or HEAD
-// of /{layer}/{z}/{x}/{y}.{glb|drc} over HTTP/1.1, in a plain target (unreserved characters
+// of /{layer}/{z}/{x}/{y}.{glb|drc|terrain} over HTTP/1.1, in a plain target (unreserved characters
 // only, so cpp-httplib's decoding would leave it as it is and bad_path would accept it), with no
 // body and none of the headers cpp-httplib acts on by itself (Range, Expect). The header values
 // kept are what cpp-httplib would give the handlers: the first non-empty one of each name, blanks
@@ -635,6 +635,7 @@ void apply_range(const httplib::Request& req, httplib::Response& res) {
 struct QuickRequest {
     std::string_view method, target, layer, z, x, y, extension;
     std::string_view origin, if_none_match, connection; // empty: absent
+    std::string_view accept, accept_encoding;           // for .terrain
 };
 
 // Header lines longer than this are left to cpp-httplib (it refuses those over 8192 bytes).
@@ -689,7 +690,7 @@ bool parse_quick(std::string_view request, QuickRequest& q) {
     q.x = segments[2];
     q.y = segments[3].substr(0, dot);
     q.extension = segments[3].substr(dot + 1);
-    if (q.extension != "glb" && q.extension != "drc") {
+    if (q.extension != "glb" && q.extension != "drc" && q.extension != "terrain") {
         return false;
     }
     std::size_t pos = line_end + 2;
@@ -718,10 +719,12 @@ bool parse_quick(std::string_view request, QuickRequest& q) {
         if (equals_ci(name, "Range") || equals_ci(name, "Expect")) {
             return false;
         }
-        std::string_view* kept = equals_ci(name, "Origin")          ? &q.origin
-                                 : equals_ci(name, "If-None-Match") ? &q.if_none_match
-                                 : equals_ci(name, "Connection")    ? &q.connection
-                                                                    : nullptr;
+        std::string_view* kept = equals_ci(name, "Origin")            ? &q.origin
+                                 : equals_ci(name, "If-None-Match")   ? &q.if_none_match
+                                 : equals_ci(name, "Connection")      ? &q.connection
+                                 : equals_ci(name, "Accept")          ? &q.accept
+                                 : equals_ci(name, "Accept-Encoding") ? &q.accept_encoding
+                                                                      : nullptr;
         if (!kept || value.empty() || !kept->empty()) {
             continue; // cpp-httplib drops empty values and answers with the first
         }
@@ -959,11 +962,35 @@ struct HttpServer::Impl {
             !parse_index(q.y, 10, y) || z > tiler::kMaxZoom) {
             return false;
         }
-        const tiler::Format format = q.extension == "glb" ? tiler::Format::Glb : tiler::Format::Drc;
-        const auto blob = tiles.cached_tile(
-            std::string(q.layer), tiler::TileId{static_cast<int>(z), x, y}, format);
+        const tiler::TileId id{static_cast<int>(z), x, y};
+        const bool terrain = q.extension == "terrain";
+        const tiler::Format format = terrain                ? tiler::Format::Terrain
+                                     : q.extension == "glb" ? tiler::Format::Glb
+                                                            : tiler::Format::Drc;
+        // A .terrain tile as serve_terrain sends it: the extensions Accept names, in the coding
+        // Accept-Encoding prefers, when that coding is already made (compressing is a worker's
+        // job).
+        Coding coding = Coding::Identity;
+        const std::string* body = nullptr;
+        const auto blob =
+            terrain
+                ? tiles.cached_terrain(std::string(q.layer),
+                                       id,
+                                       accepted_extensions(std::string(q.accept)),
+                                       [&](const Blob& b) {
+                                           coding =
+                                               b.bytes.size() >= kMinCompressBytes
+                                                   ? pick_coding(q.accept_encoding.substr(0, 1024))
+                                                   : Coding::Identity;
+                                           body = b.encoded_if_made(coding);
+                                           return body != nullptr;
+                                       })
+                : tiles.cached_tile(std::string(q.layer), id, format);
         if (!blob) {
             return false;
+        }
+        if (!terrain) {
+            body = &blob->bytes;
         }
         const bool head = q.method == "HEAD";
         const bool fresh =
@@ -1000,8 +1027,13 @@ struct HttpServer::Impl {
         if (reply.close) {
             out += "Connection: close\r\n";
         }
+        if (!fresh && coding != Coding::Identity) {
+            out += "Content-Encoding: ";
+            out += coding_name(coding);
+            out += "\r\n";
+        }
         out += "Content-Length: ";
-        out += fresh ? "0" : std::to_string(blob->bytes.size());
+        out += fresh ? "0" : std::to_string(body->size());
         out += "\r\n";
         if (!fresh) {
             out += "Content-Type: ";
@@ -1016,17 +1048,20 @@ struct HttpServer::Impl {
             out += keep_alive;
             out += "\r\n";
         }
-        if (vary_origin) {
+        if (terrain) {
+            out += vary_origin ? "Vary: Origin, Accept, Accept-Encoding\r\n"
+                               : "Vary: Accept, Accept-Encoding\r\n";
+        } else if (vary_origin) {
             out += "Vary: Origin\r\n";
         }
         out += "\r\n";
         if (!fresh && !head) {
-            reply.body = std::shared_ptr<const std::string>(blob, &blob->bytes);
+            reply.body = std::shared_ptr<const std::string>(blob, body);
         }
         ++metrics.quick_answers;
         const double seconds =
             std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-        metrics.record_request("tile", status, seconds);
+        metrics.record_request(terrain ? "terrain" : "tile", status, seconds);
         if (log::level() <= log::Level::Info) {
             // As the logger of the routes writes it (the target needs no cleaning here).
             const std::string_view target =
@@ -1036,7 +1071,7 @@ struct HttpServer::Impl {
                           sizeof line,
                           " %d %zu B %.2f ms",
                           status,
-                          fresh ? std::size_t{0} : blob->bytes.size(),
+                          fresh ? std::size_t{0} : body->size(),
                           seconds * 1e3);
             log::write_queued(log::Level::Info,
                               std::string(q.method) + " " + std::string(target) +

@@ -97,6 +97,19 @@ void lower_priority() {
 }
 
 std::string
+tile_key(const std::string& layer, const tiler::TileId& id, tiler::Format format, int eps_level);
+
+// The cache key of a quantized-mesh tile cut down to `extensions` from `full` (its ETag in the
+// key, so a regenerated tile never meets an old copy).
+std::string subset_key(const std::string& layer,
+                       const tiler::TileId& id,
+                       unsigned extensions,
+                       const Blob& full) {
+    return tile_key(layer, id, tiler::Format::Terrain, -1) + "/x" + std::to_string(extensions) +
+           "/" + full.etag;
+}
+
+std::string
 tile_key(const std::string& layer, const tiler::TileId& id, tiler::Format format, int eps_level) {
     return "t/" + layer + "/" + tiler::format_name(format) + "/" + std::to_string(eps_level) + "/" +
            std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
@@ -132,6 +145,7 @@ const std::string& Blob::encoded(Coding coding, Metrics& metrics) const {
     if (coding == Coding::Brotli) {
         std::call_once(brotli_once_, [&] {
             brotli_ = compress(bytes, Coding::Brotli);
+            brotli_made_.store(true, std::memory_order_release);
             ++metrics.brotli_compressions;
         });
         return brotli_;
@@ -139,11 +153,23 @@ const std::string& Blob::encoded(Coding coding, Metrics& metrics) const {
     if (coding == Coding::Gzip) {
         std::call_once(gzip_once_, [&] {
             gzip_ = compress(bytes, Coding::Gzip);
+            gzip_made_.store(true, std::memory_order_release);
             ++metrics.gzip_compressions;
         });
         return gzip_;
     }
     return bytes;
+}
+
+const std::string* Blob::encoded_if_made(Coding coding) const {
+    switch (coding) {
+    case Coding::Brotli:
+        return brotli_made_.load(std::memory_order_acquire) ? &brotli_ : nullptr;
+    case Coding::Gzip:
+        return gzip_made_.load(std::memory_order_acquire) ? &gzip_ : nullptr;
+    default:
+        return &bytes;
+    }
 }
 
 std::string make_etag(std::string_view bytes) {
@@ -446,13 +472,32 @@ TileService::terrain(const std::string& layer, const tiler::TileId& id, unsigned
         return full;
     }
     Impl& s = *impl_;
-    const std::string key = tile_key(layer, id, tiler::Format::Terrain, -1) + "/x" +
-                            std::to_string(extensions) + "/" + full->etag;
+    const std::string key = subset_key(layer, id, extensions, *full);
     std::shared_ptr<const Blob> blob = s.cache.get(key);
     if (!blob) {
         blob = make_blob(tiler::select_extensions(full->bytes, extensions));
         s.cache.put(key, blob);
     }
+    return blob;
+}
+
+std::shared_ptr<const Blob>
+TileService::cached_terrain(const std::string& layer,
+                            const tiler::TileId& id,
+                            unsigned extensions,
+                            const std::function<bool(const Blob&)>& usable) {
+    Impl& s = *impl_;
+    std::shared_ptr<const Blob> blob = s.cache.get(tile_key(layer, id, tiler::Format::Terrain, -1));
+    if (!blob || blob->failure != 0) {
+        return nullptr;
+    }
+    if (extensions != tiler::kAllQuantizedMeshExtensions) {
+        blob = s.cache.get(subset_key(layer, id, extensions, *blob));
+    }
+    if (!blob || !usable(*blob)) {
+        return nullptr;
+    }
+    ++s.metrics.cache_hits;
     return blob;
 }
 

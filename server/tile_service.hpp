@@ -12,7 +12,9 @@
 #include "tiler/layer.hpp"
 #include "tiler/stores/store.hpp"
 
+#include <atomic>
 #include <cstddef>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -49,10 +51,14 @@ struct Blob {
     // cached document is compressed once per ETag. Thread-safe; counts compressions in
     // `metrics`.
     const std::string& encoded(Coding coding, Metrics& metrics) const;
+    // The payload in `coding` when it is already made (always for Identity), else nullptr:
+    // never compresses, so it never takes long.
+    const std::string* encoded_if_made(Coding coding) const;
 
 private:
     mutable std::once_flag gzip_once_, brotli_once_;
     mutable std::string gzip_, brotli_;
+    mutable std::atomic<bool> gzip_made_{false}, brotli_made_{false};
 };
 
 // Strong ETag of `bytes`: a 64-bit FNV-1a hash and the length, quoted.
@@ -92,6 +98,15 @@ public:
     // and cached per mask. nullptr when busy, as tile().
     std::shared_ptr<const Blob>
     terrain(const std::string& layer, const tiler::TileId& id, unsigned extensions);
+
+    // What terrain() gives when the memory cache holds it (the tile with all extensions and,
+    // for fewer, its cut-down copy) and `usable` accepts it, else nullptr. Never generates, cuts
+    // down or reads the store, so it never waits; counts a cache hit, as terrain() does, only
+    // when it returns a tile.
+    std::shared_ptr<const Blob> cached_terrain(const std::string& layer,
+                                               const tiler::TileId& id,
+                                               unsigned extensions,
+                                               const std::function<bool(const Blob&)>& usable);
 
     // A tileset document of the layer ("tileset.json", "subtrees/0/0/0.subtree", ...). Throws
     // NotFound for an unknown layer or a path the layer has no document for.

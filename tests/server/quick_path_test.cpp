@@ -23,7 +23,7 @@ using namespace tb;
 
 struct Fixture : test::HillsLayer {
     server::ServedLayer served() const {
-        return {layer, {tiler::Format::Glb, tiler::Format::Drc}, nullptr};
+        return {layer, {tiler::Format::Glb, tiler::Format::Drc, tiler::Format::Terrain}, nullptr};
     }
     // The tile's path; `escaped`: with its zoom's first digit percent-encoded, which names the
     // same tile for cpp-httplib (it decodes the path) but is not taken by the quick path.
@@ -120,6 +120,22 @@ void warm(int port) {
     }
 }
 
+// What CesiumJS's CesiumTerrainProvider sends for .terrain tiles.
+constexpr const char* kCesiumAccept =
+    "Accept: application/vnd.quantized-mesh;extensions=octvertexnormals-watermask-metadata,"
+    "application/octet-stream;q=0.9,*/*;q=0.01\r\n";
+
+// Asks for the .terrain tile through the routes with each set of headers, so that every
+// cut-down copy and coding those headers ask for is made and in memory.
+void warm_terrain(int port, const std::vector<std::string>& header_sets) {
+    auto& f = fixture();
+    for (const auto& headers : header_sets) {
+        Conn c(port);
+        REQUIRE(c.send_all(request("GET", f.path("terrain", true), headers)));
+        REQUIRE(c.response(false).rfind("HTTP/1.1 200 ", 0) == 0);
+    }
+}
+
 std::string etag_of(const std::string& response) {
     const auto at = response.find("\r\nETag: ");
     REQUIRE(at != std::string::npos);
@@ -159,6 +175,59 @@ TEST_CASE("a tile in memory is answered by the loop with the bytes the routes se
                        });
 }
 
+TEST_CASE("a quantized-mesh tile in memory is answered by the loop as serve_terrain answers it: "
+          "extensions by Accept, codings already made, Vary, 304, HEAD") {
+    auto& f = fixture();
+    test::RunningServer s({f.served()});
+    const std::string all = kCesiumAccept;
+    const std::string normals =
+        "Accept: application/vnd.quantized-mesh;extensions=octvertexnormals\r\n";
+    warm_terrain(s.port,
+                 {all + "Accept-Encoding: gzip, deflate, br\r\n",
+                  all + "Accept-Encoding: gzip\r\n",
+                  all,
+                  normals + "Accept-Encoding: gzip\r\n",
+                  "Accept-Encoding: br\r\n"});
+    Conn c(s.port);
+    REQUIRE(c.send_all(request("GET", f.path("terrain"), all)));
+    const std::string etag = etag_of(c.response(false));
+    check_same_answers(s.port,
+                       {
+                           {"GET terrain", all + "Accept-Encoding: gzip, deflate, br\r\n"},
+                           {"GET terrain", all + "Accept-Encoding: gzip\r\n"},
+                           {"GET terrain", all + "accept-encoding: br;q=0, gzip\r\n"},
+                           {"GET terrain", all},
+                           {"GET terrain", all + "Accept-Encoding: identity\r\n"},
+                           {"GET terrain", normals + "Accept-Encoding: gzip\r\n"},
+                           {"GET terrain", "Accept-Encoding: br\r\n"}, // no extensions
+                           {"GET terrain", "Accept: */*\r\nAccept-Encoding: br\r\n"},
+                           {"HEAD terrain", all + "Accept-Encoding: br\r\n"},
+                           {"GET terrain", all + "If-None-Match: " + etag + "\r\n"},
+                           {"HEAD terrain", all + "If-None-Match: " + etag + "\r\n"},
+                           {"GET terrain", all + "Accept-Encoding:  \r\nAccept-Encoding: gzip\r\n"},
+                           {"GET terrain", all + "Origin: https://maps.example.com\r\n"},
+                       });
+    // Counted in the terrain route's metrics, with the cache hit the routes count.
+    const double ok =
+        test::metric(s.port, "tb_http_requests_total{route=\"terrain\",status=\"200\"}");
+    const double hits = test::metric(s.port, "tb_cache_hits_total");
+    CHECK(pipeline(s.port, {request("GET", f.path("terrain"), all)}).quick == 1);
+    CHECK(test::metric(s.port, "tb_http_requests_total{route=\"terrain\",status=\"200\"}") ==
+          ok + 1);
+    CHECK(test::metric(s.port, "tb_cache_hits_total") == hits + 1);
+    // A coding nobody has asked for yet is made by a worker, then the loop has it too.
+    const auto made_br = request("GET", f.path("terrain"), all + "Accept-Encoding: br\r\n");
+    CHECK(pipeline(s.port, {made_br}).quick == 1); // br was made by the warm-up
+    const auto fresh_subset = request(
+        "GET",
+        f.path("terrain"),
+        "Accept: application/vnd.quantized-mesh;extensions=watermask\r\nAccept-Encoding: gzip\r\n");
+    const Exchange first = pipeline(s.port, {fresh_subset});
+    CHECK(first.quick == 0);
+    CHECK(first.responses[0].rfind("HTTP/1.1 200 ", 0) == 0);
+    CHECK(pipeline(s.port, {fresh_subset}).quick == 1);
+}
+
 TEST_CASE("the quick path sends the CORS headers of the configured origins, or none") {
     auto& f = fixture();
     server::HttpOptions listed;
@@ -169,8 +238,13 @@ TEST_CASE("the quick path sends the CORS headers of the configured origins, or n
         INFO(http.cors_origins.size() << " origins");
         test::RunningServer s({f.served()}, {}, http);
         warm(s.port);
+        warm_terrain(s.port, {std::string(kCesiumAccept) + "Accept-Encoding: gzip\r\n"});
+        const std::string terrain = std::string(kCesiumAccept) + "Accept-Encoding: gzip\r\n";
         check_same_answers(s.port,
                            {
+                               {"GET terrain", terrain + "Origin: https://maps.example.com\r\n"},
+                               {"GET terrain", terrain + "Origin: https://evil.example\r\n"},
+                               {"GET terrain", terrain},
                                {"GET glb", "Origin: https://maps.example.com\r\n"},
                                {"GET glb", "Origin: https://b.example\r\n"},
                                {"HEAD glb", "origin: https://b.example\r\n"},
