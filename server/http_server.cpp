@@ -635,7 +635,7 @@ void apply_range(const httplib::Request& req, httplib::Response& res) {
 struct QuickRequest {
     std::string_view method, target, layer, z, x, y, extension;
     std::string_view origin, if_none_match, connection; // empty: absent
-    std::string_view accept, accept_encoding;           // for .terrain
+    std::string_view accept, accept_encoding;           // read for .terrain only
 };
 
 // Header lines longer than this are left to cpp-httplib (it refuses those over 8192 bytes).
@@ -693,6 +693,7 @@ bool parse_quick(std::string_view request, QuickRequest& q) {
     if (q.extension != "glb" && q.extension != "drc" && q.extension != "terrain") {
         return false;
     }
+    const bool terrain = q.extension == "terrain";
     std::size_t pos = line_end + 2;
     for (;;) {
         const auto end = request.find("\r\n", pos);
@@ -722,6 +723,7 @@ bool parse_quick(std::string_view request, QuickRequest& q) {
         std::string_view* kept = equals_ci(name, "Origin")            ? &q.origin
                                  : equals_ci(name, "If-None-Match")   ? &q.if_none_match
                                  : equals_ci(name, "Connection")      ? &q.connection
+                                 : !terrain                           ? nullptr
                                  : equals_ci(name, "Accept")          ? &q.accept
                                  : equals_ci(name, "Accept-Encoding") ? &q.accept_encoding
                                                                       : nullptr;
@@ -969,7 +971,7 @@ struct HttpServer::Impl {
                                                             : tiler::Format::Drc;
         // A .terrain tile as serve_terrain sends it: the extensions Accept names, in the coding
         // Accept-Encoding prefers, when that coding is already made (compressing is a worker's
-        // job).
+        // job). A 304 sends no body, so any coding will do.
         Coding coding = Coding::Identity;
         const std::string* body = nullptr;
         const auto blob =
@@ -983,6 +985,10 @@ struct HttpServer::Impl {
                                                    ? pick_coding(q.accept_encoding.substr(0, 1024))
                                                    : Coding::Identity;
                                            body = b.encoded_if_made(coding);
+                                           if (!body && !q.if_none_match.empty() &&
+                                               lists_etag(std::string(q.if_none_match), b.etag)) {
+                                               body = &b.bytes; // a 304: none of it is sent
+                                           }
                                            return body != nullptr;
                                        })
                 : tiles.cached_tile(std::string(q.layer), id, format);

@@ -215,6 +215,24 @@ TEST_CASE("a quantized-mesh tile in memory is answered by the loop as serve_terr
     CHECK(test::metric(s.port, "tb_http_requests_total{route=\"terrain\",status=\"200\"}") ==
           ok + 1);
     CHECK(test::metric(s.port, "tb_cache_hits_total") == hits + 1);
+    // A revalidation needs no coding: a 304 for a coding not made yet (br of the normals-only
+    // copy) is the loop's too, and the routes' bytes; a HEAD of it is a worker's (the routes
+    // compress for a HEAD).
+    Conn n(s.port);
+    REQUIRE(n.send_all(request("GET", f.path("terrain"), normals + "Accept-Encoding: gzip\r\n")));
+    const std::string normals_etag = etag_of(n.response(false));
+    const std::string revalidate =
+        normals + "Accept-Encoding: br\r\nIf-None-Match: " + normals_etag + "\r\n";
+    const Exchange q304 = pipeline(s.port, {request("GET", f.path("terrain"), revalidate)});
+    const Exchange n304 = pipeline(s.port, {request("GET", f.path("terrain", true), revalidate)});
+    CHECK(q304.quick == 1);
+    CHECK(q304.responses[0].rfind("HTTP/1.1 304 ", 0) == 0);
+    CHECK(q304.responses == n304.responses);
+    const double hits_before_head = test::metric(s.port, "tb_cache_hits_total");
+    CHECK(
+        pipeline(s.port, {request("HEAD", f.path("terrain"), normals + "Accept-Encoding: br\r\n")})
+            .quick == 0);
+    CHECK(test::metric(s.port, "tb_cache_hits_total") == hits_before_head + 1); // the route's
     // A coding nobody has asked for yet is made by a worker, then the loop has it too.
     const auto made_br = request("GET", f.path("terrain"), all + "Accept-Encoding: br\r\n");
     CHECK(pipeline(s.port, {made_br}).quick == 1); // br was made by the warm-up
