@@ -1,5 +1,6 @@
 // Accept-Encoding negotiation and compression.
 #include "server/encoding.hpp"
+#include "server/request_head.hpp"
 
 #include <brotli/encode.h>
 #include <zlib.h>
@@ -10,31 +11,6 @@
 
 namespace tb::server {
 namespace {
-
-std::string_view trim(std::string_view s) {
-    while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) {
-        s.remove_prefix(1);
-    }
-    while (!s.empty() && (s.back() == ' ' || s.back() == '\t')) {
-        s.remove_suffix(1);
-    }
-    return s;
-}
-
-bool iequals(std::string_view a, std::string_view b) {
-    if (a.size() != b.size()) {
-        return false;
-    }
-    for (std::size_t i = 0; i < a.size(); ++i) {
-        char x = a[i], y = b[i];
-        x = (x >= 'A' && x <= 'Z') ? static_cast<char>(x - 'A' + 'a') : x;
-        y = (y >= 'A' && y <= 'Z') ? static_cast<char>(y - 'A' + 'a') : y;
-        if (x != y) {
-            return false;
-        }
-    }
-    return true;
-}
 
 // A qvalue (RFC 9110 section 12.4.2) in thousandths: "0", "0.5", "1", "1.000"; -1 if malformed.
 int parse_qvalue(std::string_view q) {
@@ -67,23 +43,23 @@ Coding pick_coding(std::string_view accept) {
         std::string_view item = accept.substr(0, comma);
         accept = comma == std::string_view::npos ? std::string_view() : accept.substr(comma + 1);
         const std::size_t semi = item.find(';');
-        const std::string_view coding = trim(item.substr(0, semi));
+        const std::string_view coding = trim_ows(item.substr(0, semi));
         int q = 1000;
         if (semi != std::string_view::npos) {
             std::string_view params = item.substr(semi + 1);
             q = -1;
             // Only the q parameter is defined for Accept-Encoding.
-            const std::string_view p = trim(params);
+            const std::string_view p = trim_ows(params);
             if (p.size() >= 2 && (p[0] == 'q' || p[0] == 'Q') && p[1] == '=') {
-                q = parse_qvalue(trim(p.substr(2)));
+                q = parse_qvalue(trim_ows(p.substr(2)));
             }
             if (q < 0) {
                 continue; // malformed: ignore the item
             }
         }
-        if (iequals(coding, "gzip") || iequals(coding, "x-gzip")) {
+        if (equals_ci(coding, "gzip") || equals_ci(coding, "x-gzip")) {
             gzip = std::max(gzip, q);
-        } else if (iequals(coding, "br")) {
+        } else if (equals_ci(coding, "br")) {
             br = std::max(br, q);
         } else if (coding == "*") {
             any = std::max(any, q);

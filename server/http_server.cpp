@@ -1,6 +1,7 @@
 // HTTP routes of `terrabound serve`. Handlers are thin: parse the request, ask TileService,
 // write the response. Errors are thrown and mapped to a status by one exception handler.
 #include "server/http_server.hpp"
+#include "server/request_head.hpp"
 
 #include "core/error.hpp"
 #include "tiler/cpus.hpp"
@@ -463,19 +464,6 @@ bool within(const std::filesystem::path& p, const std::filesystem::path& root) {
                         (rs.back() == '/' || ps[rs.size()] == '/'));
 }
 
-bool equals_ci(std::string_view a, std::string_view b) {
-    if (a.size() != b.size()) {
-        return false;
-    }
-    for (std::size_t i = 0; i < a.size(); ++i) {
-        if (std::tolower(static_cast<unsigned char>(a[i])) !=
-            std::tolower(static_cast<unsigned char>(b[i]))) {
-            return false;
-        }
-    }
-    return true;
-}
-
 // One byte range (RFC 9110 14.1.2): first-last, first- (to the end) or -suffix_length.
 // -1 marks the absent bound.
 struct ByteRange {
@@ -486,21 +474,12 @@ struct ByteRange {
 // The single range of a Range value, or nothing when the value is not exactly one byte range
 // (several ranges, another unit, a malformed one): such a Range is ignored.
 std::optional<ByteRange> single_byte_range(std::string_view value) {
-    const auto trim = [](std::string_view v) {
-        while (!v.empty() && (v.front() == ' ' || v.front() == '\t')) {
-            v.remove_prefix(1);
-        }
-        while (!v.empty() && (v.back() == ' ' || v.back() == '\t')) {
-            v.remove_suffix(1);
-        }
-        return v;
-    };
-    value = trim(value);
+    value = trim_ows(value);
     constexpr std::string_view kUnit = "bytes=";
     if (value.size() < kUnit.size() || !equals_ci(value.substr(0, kUnit.size()), kUnit)) {
         return std::nullopt;
     }
-    value = trim(value.substr(kUnit.size()));
+    value = trim_ows(value.substr(kUnit.size()));
     const std::size_t dash = value.find('-');
     if (dash == std::string_view::npos || value.find(',') != std::string_view::npos) {
         return std::nullopt;
@@ -520,7 +499,8 @@ std::optional<ByteRange> single_byte_range(std::string_view value) {
         return true;
     };
     ByteRange r;
-    const std::string_view a = trim(value.substr(0, dash)), b = trim(value.substr(dash + 1));
+    const std::string_view a = trim_ows(value.substr(0, dash)),
+                           b = trim_ows(value.substr(dash + 1));
     if (a.empty()) {
         if (!digits(b, r.last)) {
             return std::nullopt;
@@ -710,13 +690,7 @@ bool parse_quick(std::string_view request, QuickRequest& q) {
             return false;
         }
         const std::string_view name = field.substr(0, colon);
-        std::string_view value = field.substr(colon + 1);
-        while (!value.empty() && (value.front() == ' ' || value.front() == '\t')) {
-            value.remove_prefix(1);
-        }
-        while (!value.empty() && (value.back() == ' ' || value.back() == '\t')) {
-            value.remove_suffix(1);
-        }
+        const std::string_view value = trim_ows(field.substr(colon + 1));
         if (equals_ci(name, "Range") || equals_ci(name, "Expect")) {
             return false;
         }
@@ -849,7 +823,10 @@ struct HttpServer::Impl {
     std::shared_ptr<const Blob> layers_blob;      // /layers never changes while serving
     std::string keep_alive;                       // the Keep-Alive header cpp-httplib sends
     bool cors_any = false;                        // cors_origins holds "*"
-    std::unique_ptr<Connections> connections;     // last: stopped first
+    // A list of origins (no "*"): every answer depends on Origin, one asked without it too, so
+    // that a shared cache never gives that one to a page of a listed origin.
+    bool vary_origin = false;
+    std::unique_ptr<Connections> connections; // last: stopped first
 
     Impl(TileService& t, Metrics& m, const HttpOptions& o) : tiles(t), metrics(m), options(o) {
         const auto& limits = options.limits;
@@ -864,6 +841,7 @@ struct HttpServer::Impl {
         for (const auto& origin : options.cors_origins) {
             cors_any = cors_any || origin == "*";
         }
+        vary_origin = !cors_any && !options.cors_origins.empty();
         server.set_payload_max_length(limits.head.body_bytes);
         // SO_REUSEADDR alone: cpp-httplib's default adds SO_REUSEPORT, with which a second
         // server on the same port starts "successfully" and steals part of the connections.
@@ -1010,18 +988,16 @@ struct HttpServer::Impl {
         if (head) {
             out += "Accept-Ranges: bytes\r\n";
         }
-        bool vary_origin = false;
         if (cors_any) {
             out += "Access-Control-Allow-Origin: *\r\n";
-        } else if (!options.cors_origins.empty()) {
+        } else if (vary_origin && !q.origin.empty()) {
             for (const auto& o : options.cors_origins) {
-                if (!q.origin.empty() && o == q.origin) {
+                if (o == q.origin) {
                     out += "Access-Control-Allow-Origin: ";
                     out += o;
                     out += "\r\n";
                 }
             }
-            vary_origin = true;
         }
         if (!options.cors_origins.empty()) {
             out += "Access-Control-Expose-Headers: ETag, Content-Length, Content-Range, "
@@ -1054,11 +1030,10 @@ struct HttpServer::Impl {
             out += keep_alive;
             out += "\r\n";
         }
-        if (terrain) {
-            out += vary_origin ? "Vary: Origin, Accept, Accept-Encoding\r\n"
-                               : "Vary: Accept, Accept-Encoding\r\n";
-        } else if (vary_origin) {
-            out += "Vary: Origin\r\n";
+        if (terrain || vary_origin) {
+            out += "Vary: ";
+            out += terrain ? terrain_vary() : "Origin";
+            out += "\r\n";
         }
         out += "\r\n";
         if (!fresh && !head) {
@@ -1170,13 +1145,9 @@ struct HttpServer::Impl {
     }
 
     void cors(const httplib::Request& req, httplib::Response& res) const {
-        bool any = false;
-        for (const auto& o : options.cors_origins) {
-            any = any || o == "*";
-        }
-        if (any) {
+        if (cors_any) {
             res.set_header("Access-Control-Allow-Origin", "*");
-        } else if (!options.cors_origins.empty()) {
+        } else if (vary_origin) {
             if (req.has_header("Origin")) {
                 const std::string origin = req.get_header_value("Origin");
                 for (const auto& o : options.cors_origins) {
@@ -1185,14 +1156,18 @@ struct HttpServer::Impl {
                     }
                 }
             }
-            // With a list of origins every answer depends on Origin, one asked without it too:
-            // a shared cache must not give that one to a page of a listed origin.
             res.set_header("Vary", "Origin");
         }
         if (!options.cors_origins.empty()) {
             res.set_header("Access-Control-Expose-Headers",
                            "ETag, Content-Length, Content-Range, Retry-After");
         }
+    }
+
+    // The Vary of a .terrain tile: its extensions depend on Accept, its coding on
+    // Accept-Encoding, and with a list of CORS origins the answer on Origin.
+    const char* terrain_vary() const {
+        return vary_origin ? "Origin, Accept, Accept-Encoding" : "Accept, Accept-Encoding";
     }
 
     std::string layers_json() const {
@@ -1582,15 +1557,8 @@ struct HttpServer::Impl {
                   tiler::media_type(tiler::Format::Terrain),
                   kTileCacheControl,
                   &metrics);
-        // The extensions sent depend on Accept, the coding on Accept-Encoding (and, with a
-        // list of CORS origins, the answer on Origin: cors() said so).
-        bool by_origin = false;
-        for (auto [it, end] = res.headers.equal_range("Vary"); it != end; ++it) {
-            by_origin = by_origin || it->second == "Origin";
-        }
         res.headers.erase("Vary");
-        res.set_header("Vary",
-                       by_origin ? "Origin, Accept, Accept-Encoding" : "Accept, Accept-Encoding");
+        res.set_header("Vary", terrain_vary());
     }
 
     void serve_terrain3d(const httplib::Request& req, httplib::Response& res) {

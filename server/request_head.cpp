@@ -34,36 +34,6 @@ bool is_tchar(unsigned char c) {
     }
 }
 
-bool iequals(std::string_view a, std::string_view b) {
-    if (a.size() != b.size()) {
-        return false;
-    }
-    for (std::size_t i = 0; i < a.size(); ++i) {
-        unsigned char x = static_cast<unsigned char>(a[i]);
-        unsigned char y = static_cast<unsigned char>(b[i]);
-        if (x >= 'A' && x <= 'Z') {
-            x = static_cast<unsigned char>(x - 'A' + 'a');
-        }
-        if (y >= 'A' && y <= 'Z') {
-            y = static_cast<unsigned char>(y - 'A' + 'a');
-        }
-        if (x != y) {
-            return false;
-        }
-    }
-    return true;
-}
-
-std::string_view trim_ows(std::string_view s) {
-    while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) {
-        s.remove_prefix(1);
-    }
-    while (!s.empty() && (s.back() == ' ' || s.back() == '\t')) {
-        s.remove_suffix(1);
-    }
-    return s;
-}
-
 RequestHead bad(int status, std::string error) {
     RequestHead h;
     h.state = RequestHead::State::Bad;
@@ -110,6 +80,36 @@ std::string check_request_line(std::string_view line, int& status) {
 }
 
 } // namespace
+
+bool equals_ci(std::string_view a, std::string_view b) {
+    if (a.size() != b.size()) {
+        return false;
+    }
+    for (std::size_t i = 0; i < a.size(); ++i) {
+        unsigned char x = static_cast<unsigned char>(a[i]);
+        unsigned char y = static_cast<unsigned char>(b[i]);
+        if (x >= 'A' && x <= 'Z') {
+            x = static_cast<unsigned char>(x - 'A' + 'a');
+        }
+        if (y >= 'A' && y <= 'Z') {
+            y = static_cast<unsigned char>(y - 'A' + 'a');
+        }
+        if (x != y) {
+            return false;
+        }
+    }
+    return true;
+}
+
+std::string_view trim_ows(std::string_view s) {
+    while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) {
+        s.remove_prefix(1);
+    }
+    while (!s.empty() && (s.back() == ' ' || s.back() == '\t')) {
+        s.remove_suffix(1);
+    }
+    return s;
+}
 
 RequestHead check_request_head(std::string_view bytes, const HeadLimits& limits) {
     std::size_t pos = 0;
@@ -188,7 +188,7 @@ RequestHead check_request_head(std::string_view bytes, const HeadLimits& limits)
                 return bad(400, "a header field value holds a control character");
             }
         }
-        if (iequals(name, "Content-Length")) {
+        if (equals_ci(name, "Content-Length")) {
             if (has_length) {
                 return bad(400, "Content-Length is given more than once");
             }
@@ -204,11 +204,11 @@ RequestHead check_request_head(std::string_view bytes, const HeadLimits& limits)
                 }
                 length = length * 10 + static_cast<std::uint64_t>(c - '0');
             }
-        } else if (iequals(name, "Transfer-Encoding")) {
+        } else if (equals_ci(name, "Transfer-Encoding")) {
             return bad(has_length ? 400 : 501,
                        "Transfer-Encoding in a request is not supported; this server takes no "
                        "request bodies");
-        } else if (iequals(name, "Host")) {
+        } else if (equals_ci(name, "Host")) {
             ++hosts;
         }
         pos = nl + 1;

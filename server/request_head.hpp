@@ -33,4 +33,11 @@ struct RequestHead {
 // not decimal or too large, and heads past `limits`.
 RequestHead check_request_head(std::string_view bytes, const HeadLimits& limits);
 
+// ASCII case-insensitive equality, as header names and tokens compare.
+bool equals_ci(std::string_view a, std::string_view b);
+
+// `s` without the optional whitespace (spaces and tabs) at either end, as field values and list
+// items are read (RFC 9110 section 5.6.3).
+std::string_view trim_ows(std::string_view s);
+
 } // namespace tb::server

@@ -97,7 +97,10 @@ void lower_priority() {
 }
 
 std::string
-tile_key(const std::string& layer, const tiler::TileId& id, tiler::Format format, int eps_level);
+tile_key(const std::string& layer, const tiler::TileId& id, tiler::Format format, int eps_level) {
+    return "t/" + layer + "/" + tiler::format_name(format) + "/" + std::to_string(eps_level) + "/" +
+           std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
+}
 
 // The cache key of a quantized-mesh tile cut down to `extensions` from `full` (its ETag in the
 // key, so a regenerated tile never meets an old copy).
@@ -107,12 +110,6 @@ std::string subset_key(const std::string& layer,
                        const Blob& full) {
     return tile_key(layer, id, tiler::Format::Terrain, -1) + "/x" + std::to_string(extensions) +
            "/" + full.etag;
-}
-
-std::string
-tile_key(const std::string& layer, const tiler::TileId& id, tiler::Format format, int eps_level) {
-    return "t/" + layer + "/" + tiler::format_name(format) + "/" + std::to_string(eps_level) + "/" +
-           std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
 }
 
 std::shared_ptr<const Blob> make_blob(std::string bytes) {
