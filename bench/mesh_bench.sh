@@ -3,7 +3,7 @@
 # on the same heightmaps: delatin (npm) always, and hmm (fogleman/hmm, C++) when HMM names its
 # binary. Not a test.
 #
-#   [HMM=/path/to/hmm] bench/mesh_bench.sh [--reps N] [--quick]
+#   [HMM=/path/to/hmm] bench/mesh_bench.sh [--reps N] [--quick] [--instructions]
 #
 # Builds bench/mesh_bench in Release into build-bench (-DTB_BUILD_BENCH=ON), copies
 # ../shared/bench (read-only) to bench/runs/peer (git-ignored), installs delatin there with
@@ -17,6 +17,13 @@
 # is eps in its own unit (see below), and its time is the "triangulating" time it prints.
 # Without HMM the hmm columns are "-". linf_check is the shared independent checker's verdict
 # on our mesh. Exits 1 if any of our meshes misses a sample by more than eps.
+# --instructions then counts, under valgrind's callgrind, the instructions each mesher executes
+# for every case (ours: core::triangulate; hmm: Triangulator::Run, without the copy of its
+# points and triangles that its "triangulating" time also holds, about 1 %) and prints
+#   input size eps ir hmm_ir hmm_ir_ratio
+# with hmm_ir_ratio = hmm's count / ours. Unlike a time on a shared machine the counts repeat
+# exactly, so they show small changes that the times bury in noise; they say nothing of cache
+# misses or stalls, so the times stay the target. About 50x slower than a timing round.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 shared=${TB_SHARED_BENCH:-$root/../shared/bench}
@@ -24,13 +31,19 @@ runs=$root/bench/runs
 peer=$runs/peer
 reps=3
 quick=0
+instructions=0
 while [ $# -gt 0 ]; do
     case $1 in
         --reps) reps=$2; shift 2 ;;
         --quick) quick=1; shift ;;
-        *) echo "usage: [HMM=/path/to/hmm] $0 [--reps N] [--quick]" >&2; exit 2 ;;
+        --instructions) instructions=1; shift ;;
+        *) echo "usage: [HMM=/path/to/hmm] $0 [--reps N] [--quick] [--instructions]" >&2; exit 2 ;;
     esac
 done
+if [ "$instructions" = 1 ] && ! command -v valgrind > /dev/null; then
+    echo "mesh_bench.sh: --instructions needs valgrind (apt-get install valgrind)" >&2
+    exit 2
+fi
 
 # ---- build (Release, our target only, 2 jobs) ----
 mkdir -p "$runs"
@@ -146,4 +159,36 @@ for c in "${cases[@]}"; do
     done <<< "$ours"
     unset ms hms htris
 done
+
+# ---- instruction counts (--instructions): one run of each mesher per case under callgrind ----
+# Prints the count callgrind collected inside the named function(s) of one run.
+count_ir() {
+    local function=$1
+    shift
+    valgrind --tool=callgrind --callgrind-out-file=/dev/null --toggle-collect="$function" "$@" \
+        2>&1 > /dev/null | sed -n 's/.*Collected : \([0-9]*\)$/\1/p'
+}
+if [ "$instructions" = 1 ]; then
+    printf 'input\tsize\teps\tir\thmm_ir\thmm_ir_ratio\n'
+    for c in "${cases[@]}"; do
+        read -r name size epss <<< "$c"
+        for eps in ${epss//,/ }; do
+            ir=$(count_ir 'tb::core::triangulate(*' "$bench" --reps 1 \
+                "$name=data/$name.f32:$size:$size" "$eps")
+            hcols="-\t-"
+            if [ -n "$hmm" ]; then
+                q=$(node to_png16.mjs "data/$name.f32" "$size" "$size" "$runs/meshes/$name.png")
+                unit=$(sed 's/.*"unit":\([0-9.e+-]*\).*/\1/' <<< "$q")
+                lossy=0
+                grep -q '"lossless":true' <<< "$q" ||
+                    lossy=$(sed 's/.*"max_quant_error":\([0-9.e+-]*\).*/\1/' <<< "$q")
+                e=$(awk -v e="$eps" -v l="$lossy" -v u="$unit" 'BEGIN { printf "%.9g", (e - l) / u }')
+                hir=$(count_ir 'Triangulator::Run*' "$hmm" "$runs/meshes/$name.png" \
+                    "$runs/meshes/hmm-$name-eps$eps.stl" -z 65535 -e "$e")
+                hcols=$(awk -v a="$ir" -v b="$hir" 'BEGIN { printf "%.0f\t%.3f", b, b / a }')
+            fi
+            printf '%s\t%s\t%s\t%s\t%b\n' "$name" "$size" "$eps" "$ir" "$hcols"
+        done
+    done
+fi
 exit $status
