@@ -100,6 +100,7 @@ fi
 minimum() { awk -v a="$1" -v b="$2" 'BEGIN { print (a == "" || b + 0 < a + 0) ? b : a }'; }
 
 status=0
+declare -A hmm_unit=() hmm_lossy=() # per input, for --instructions
 printf 'input\tsize\teps\tms\ttriangles\tachieved_max_err\tdelatin_triangles\tdelatin_ratio'
 printf '\tdelatin_ms\tdelatin_speed\thmm_triangles\thmm_ratio\thmm_ms\thmm_speed\tlinf_check\n'
 for c in "${cases[@]}"; do
@@ -115,6 +116,8 @@ for c in "${cases[@]}"; do
         lossy=$(sed 's/.*"max_quant_error":\([0-9.e+-]*\).*/\1/' <<< "$q")
         grep -q '"lossless":true' <<< "$q" && lossy=0 ||
             echo "mesh_bench.sh: $name is not exact in 16 bits (max rounding $lossy)" >&2
+        hmm_unit[$name]=$unit
+        hmm_lossy[$name]=$lossy
     fi
     declare -A ms=() hms=() htris=()
     ours=""
@@ -177,12 +180,9 @@ if [ "$instructions" = 1 ]; then
                 "$name=data/$name.f32:$size:$size" "$eps")
             hcols="-\t-"
             if [ -n "$hmm" ]; then
-                q=$(node to_png16.mjs "data/$name.f32" "$size" "$size" "$runs/meshes/$name.png")
-                unit=$(sed 's/.*"unit":\([0-9.e+-]*\).*/\1/' <<< "$q")
-                lossy=0
-                grep -q '"lossless":true' <<< "$q" ||
-                    lossy=$(sed 's/.*"max_quant_error":\([0-9.e+-]*\).*/\1/' <<< "$q")
-                e=$(awk -v e="$eps" -v l="$lossy" -v u="$unit" 'BEGIN { printf "%.9g", (e - l) / u }')
+                # The PNG and eps of the timing rounds above.
+                e=$(awk -v e="$eps" -v l="${hmm_lossy[$name]}" -v u="${hmm_unit[$name]}" \
+                    'BEGIN { printf "%.9g", (e - l) / u }')
                 hir=$(count_ir 'Triangulator::Run*' "$hmm" "$runs/meshes/$name.png" \
                     "$runs/meshes/hmm-$name-eps$eps.stl" -z 65535 -e "$e")
                 hcols=$(awk -v a="$ir" -v b="$hir" 'BEGIN { printf "%.0f\t%.3f", b, b / a }')
