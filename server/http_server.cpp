@@ -282,17 +282,17 @@ bool not_modified(const httplib::Request& req, const std::string& etag) {
 // Documents shorter than this are sent as they are: compression would hardly shrink them.
 constexpr std::size_t kMinCompressBytes = 256;
 
-// Sends `blob`; `metrics` non-null: it is a document that may be compressed (JSON), in the
-// coding the client's Accept-Encoding prefers, made once per blob.
+// Sends `blob`; `compress` non-null: it may be compressed (JSON, quantized-mesh), in the
+// coding the client's Accept-Encoding prefers, made once per blob by that service.
 void send_blob(const httplib::Request& req,
                httplib::Response& res,
                const Blob& blob,
                const char* media_type,
                const char* cache_control,
-               Metrics* metrics = nullptr) {
+               TileService* compress = nullptr) {
     res.set_header("ETag", blob.etag);
     res.set_header("Cache-Control", cache_control);
-    if (metrics) {
+    if (compress) {
         res.set_header("Vary", "Accept-Encoding");
     }
     if (not_modified(req, blob.etag)) {
@@ -300,14 +300,14 @@ void send_blob(const httplib::Request& req,
         return;
     }
     res.status = 200;
-    const Coding coding = metrics && blob.bytes.size() >= kMinCompressBytes
+    const Coding coding = compress && blob.bytes.size() >= kMinCompressBytes
                               ? pick_coding(t_accept_encoding)
                               : Coding::Identity;
     if (coding == Coding::Identity) {
         res.set_content(blob.bytes, media_type);
         return;
     }
-    res.set_content(blob.encoded(coding, *metrics), media_type);
+    res.set_content(compress->encoded(blob, coding), media_type);
     res.set_header("Content-Encoding", coding_name(coding));
 }
 
@@ -1443,7 +1443,7 @@ struct HttpServer::Impl {
 
         server.Get("/layers", [this](const httplib::Request& req, httplib::Response& res) {
             t_request.route = "layers";
-            send_blob(req, res, *layers_blob, "application/json", kDocumentCacheControl, &metrics);
+            send_blob(req, res, *layers_blob, "application/json", kDocumentCacheControl, &tiles);
         });
 
         // Raster DEM tiles and their TileJSON (EPSG:3857 XYZ, whatever the layer's scheme).
@@ -1506,7 +1506,7 @@ struct HttpServer::Impl {
                                  *blob,
                                  json ? "application/json" : "application/octet-stream",
                                  kDocumentCacheControl,
-                                 json ? &metrics : nullptr);
+                                 json ? &tiles : nullptr);
                    });
     }
 
@@ -1556,7 +1556,7 @@ struct HttpServer::Impl {
                   *blob,
                   tiler::media_type(tiler::Format::Terrain),
                   kTileCacheControl,
-                  &metrics);
+                  &tiles);
         res.headers.erase("Vary");
         res.set_header("Vary", terrain_vary());
     }
@@ -1582,7 +1582,7 @@ struct HttpServer::Impl {
                   *blob,
                   tiler::media_type(tiler::Format::Terrain3d),
                   kTileCacheControl,
-                  &metrics);
+                  &tiles);
     }
 
     void serve_tile(const httplib::Request& req, httplib::Response& res) {

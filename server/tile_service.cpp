@@ -34,7 +34,9 @@ constexpr long long kMaxWaiting = 1024;
 // Bookkeeping bytes charged per cache entry on top of key and payload.
 constexpr std::size_t kEntryOverhead = 128;
 
-// A least-recently-used map bounded by the bytes of its keys and values.
+// A least-recently-used map bounded by the bytes of its keys and values, the compressed copies
+// the values carry included: a copy made while its blob is cached is charged to the blob's
+// entry when made (charge), one made before when the blob is put.
 class LruCache {
 public:
     LruCache(std::size_t capacity, Metrics& metrics) : capacity_(capacity), metrics_(metrics) {}
@@ -46,37 +48,74 @@ public:
             return nullptr;
         }
         order_.splice(order_.begin(), order_, it->second);
-        return it->second->second;
+        return it->second->blob;
     }
 
     void put(const std::string& key, std::shared_ptr<const Blob> blob) {
-        const std::size_t cost = key.size() + blob->bytes.size() + kEntryOverhead;
-        if (cost > capacity_) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        Entry entry{key, std::move(blob), key.size() + kEntryOverhead, 0};
+        entry.charged += entry.blob->bytes.size();
+        // Under the lock, so that a copy made meanwhile is charged here or by charge(), once.
+        for (const Coding coding : {Coding::Gzip, Coding::Brotli}) {
+            if (const std::string* copy = entry.blob->encoded_if_made(coding)) {
+                entry.charged += copy->size();
+                entry.codings |= bit(coding);
+            }
+        }
+        if (entry.charged > capacity_) {
             return; // larger than the whole cache: serve it, don't keep it
         }
-        std::lock_guard<std::mutex> lock(mutex_);
-        const auto it = index_.find(key);
-        if (it != index_.end()) {
-            bytes_ -= cost_of(*it->second);
-            order_.erase(it->second);
-            index_.erase(it);
+        if (const auto it = index_.find(key); it != index_.end()) {
+            erase(it->second);
         }
-        order_.emplace_front(key, std::move(blob));
+        bytes_ += entry.charged;
+        order_.push_front(std::move(entry));
         index_.emplace(key, order_.begin());
-        bytes_ += cost;
-        while (bytes_ > capacity_ && !order_.empty()) {
-            bytes_ -= cost_of(order_.back());
-            index_.erase(order_.back().first);
-            order_.pop_back();
+        by_blob_[order_.front().blob.get()] = order_.begin();
+        trim();
+    }
+
+    // The copy of `blob` in `coding`, of `size` bytes, was just made: charged to the blob's
+    // entry, if the cache holds it and has not charged that copy yet.
+    void charge(const Blob* blob, Coding coding, std::size_t size) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        const auto it = by_blob_.find(blob);
+        if (it == by_blob_.end() || (it->second->codings & bit(coding)) != 0) {
+            return;
         }
-        metrics_.cache_bytes = bytes_;
-        metrics_.cache_entries = index_.size();
+        it->second->codings |= bit(coding);
+        it->second->charged += size;
+        bytes_ += size;
+        trim();
     }
 
 private:
-    using Entry = std::pair<std::string, std::shared_ptr<const Blob>>;
-    static std::size_t cost_of(const Entry& e) {
-        return e.first.size() + e.second->bytes.size() + kEntryOverhead;
+    struct Entry {
+        std::string key;
+        std::shared_ptr<const Blob> blob;
+        std::size_t charged; // key, payload, copies charged so far and kEntryOverhead
+        unsigned codings;    // bit(coding) of each copy charged
+    };
+    using Iterator = std::list<Entry>::iterator;
+
+    static unsigned bit(Coding coding) { return 1u << static_cast<unsigned>(coding); }
+
+    void erase(Iterator it) {
+        bytes_ -= it->charged;
+        index_.erase(it->key);
+        if (const auto b = by_blob_.find(it->blob.get()); b != by_blob_.end() && b->second == it) {
+            by_blob_.erase(b);
+        }
+        order_.erase(it);
+    }
+
+    // Evicts the least recently used entries until the bound holds.
+    void trim() {
+        while (bytes_ > capacity_ && !order_.empty()) {
+            erase(std::prev(order_.end()));
+        }
+        metrics_.cache_bytes = bytes_;
+        metrics_.cache_entries = index_.size();
     }
 
     std::size_t capacity_;
@@ -84,7 +123,8 @@ private:
     std::mutex mutex_;
     std::size_t bytes_ = 0;
     std::list<Entry> order_; // most recent first
-    std::unordered_map<std::string, std::list<Entry>::iterator> index_;
+    std::unordered_map<std::string, Iterator> index_;
+    std::unordered_map<const Blob*, Iterator> by_blob_;
 };
 
 // The generation threads yield the CPU to the threads that answer requests, so that health
@@ -138,12 +178,15 @@ void throw_if_failure(const Blob& blob) {
 
 } // namespace
 
-const std::string& Blob::encoded(Coding coding, Metrics& metrics) const {
+const std::string& Blob::encoded(Coding coding, Metrics& metrics, bool* made) const {
     if (coding == Coding::Brotli) {
         std::call_once(brotli_once_, [&] {
             brotli_ = compress(bytes, Coding::Brotli);
             brotli_made_.store(true, std::memory_order_release);
             ++metrics.brotli_compressions;
+            if (made != nullptr) {
+                *made = true;
+            }
         });
         return brotli_;
     }
@@ -152,6 +195,9 @@ const std::string& Blob::encoded(Coding coding, Metrics& metrics) const {
             gzip_ = compress(bytes, Coding::Gzip);
             gzip_made_.store(true, std::memory_order_release);
             ++metrics.gzip_compressions;
+            if (made != nullptr) {
+                *made = true;
+            }
         });
         return gzip_;
     }
@@ -212,6 +258,15 @@ TileService::TileService(std::vector<ServedLayer> layers,
 }
 
 TileService::~TileService() = default;
+
+const std::string& TileService::encoded(const Blob& blob, Coding coding) {
+    bool made = false;
+    const std::string& out = blob.encoded(coding, impl_->metrics, &made);
+    if (made) {
+        impl_->cache.charge(&blob, coding, out.size());
+    }
+    return out;
+}
 
 int TileService::max_waiting() const {
     return impl_->options.max_waiting;

@@ -49,8 +49,9 @@ struct Blob {
 
     // The payload in `coding` (gzip or br), compressed on first use and kept with the blob: a
     // cached document is compressed once per ETag. Thread-safe; counts compressions in
-    // `metrics`.
-    const std::string& encoded(Coding coding, Metrics& metrics) const;
+    // `metrics`. Sets `*made`, when given, if this call made the copy. TileService::encoded
+    // also counts the copy against the memory cache's bound.
+    const std::string& encoded(Coding coding, Metrics& metrics, bool* made = nullptr) const;
     // The payload in `coding` when it is already made (always for Identity), else nullptr:
     // never compresses, so it never takes long.
     const std::string* encoded_if_made(Coding coding) const;
@@ -77,6 +78,11 @@ public:
     const ServedLayer* find(const std::string& name) const; // nullptr when unknown
     // Requests that may wait for generations at once (TileServiceOptions::max_waiting, resolved).
     int max_waiting() const;
+
+    // blob.encoded(coding): a compressed copy made here counts against the memory cache's
+    // bound (TileServiceOptions::cache_bytes) for as long as the cache keeps the blob, so that
+    // tiles and documents sent in gzip and br do not hold several times the bound.
+    const std::string& encoded(const Blob& blob, Coding coding);
 
     // The encoded tile, or nullptr when the generation queue or the requests waiting for
     // generations are at their limit (answer 503; decided at once, without waiting). Throws

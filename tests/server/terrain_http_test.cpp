@@ -201,6 +201,69 @@ TEST_CASE("a terrain tile carries exactly the extensions its Accept header names
     CHECK(plain->body == bare);
 }
 
+TEST_CASE("the gzip and br copies of a cached terrain tile count against cache_mb, once each") {
+    auto& f = fixture();
+    RunningServer server({{f.layer, {tiler::Format::Terrain}, nullptr}});
+    auto c = server.client();
+    c.set_decompress(false);
+    const auto r = f.layer->tiles_at(f.layer->max_zoom());
+    const std::string url = terrain_url({f.layer->max_zoom(), r.x0, r.y0});
+    const auto get = [&](const char* coding) {
+        httplib::Headers h{{"Accept", kCesiumAccept}};
+        if (coding != nullptr) {
+            h.emplace("Accept-Encoding", coding);
+        }
+        auto res = c.Get(url.c_str(), h);
+        REQUIRE(res);
+        REQUIRE(res->status == 200);
+        CHECK(res->get_header_value("Content-Encoding") == (coding ? coding : ""));
+        return res->body.size();
+    };
+    const auto cached = [&] { return test::metric(server.port, "tb_cache_bytes"); };
+    const std::size_t plain = get(nullptr);
+    const double before = cached();
+    CHECK(before > static_cast<double>(plain));
+    const std::size_t gzipped = get("gzip");
+    CHECK(cached() == before + static_cast<double>(gzipped));
+    const std::size_t brotli = get("br");
+    CHECK(cached() == before + static_cast<double>(gzipped + brotli));
+    // Made and charged once: asking again changes nothing.
+    CHECK(get("gzip") == gzipped);
+    CHECK(get("br") == brotli);
+    CHECK(cached() == before + static_cast<double>(gzipped + brotli));
+}
+
+TEST_CASE("with gzip and br copies the memory cache still holds at most cache_mb") {
+    auto& f = fixture();
+    const int z = f.layer->max_zoom();
+    const auto r = f.layer->tiles_at(z);
+    // Room for about three tiles as they are made, so a tile with both copies nearly fills it
+    // and the copies of the next ones must evict.
+    const std::string one = f.layer->make_tile({z, r.x0, r.y0}, tiler::Format::Terrain);
+    server::TileServiceOptions options;
+    options.cache_bytes = 3 * one.size();
+    RunningServer server({{f.layer, {tiler::Format::Terrain}, nullptr}}, options);
+    auto c = server.client();
+    c.set_decompress(false);
+    int asked = 0;
+    for (int y = r.y0; y <= r.y1; ++y) {
+        for (int x = r.x0; x <= r.x1; ++x, ++asked) {
+            for (const char* coding : {"identity", "gzip", "br"}) {
+                auto res = c.Get(terrain_url({z, x, y}).c_str(),
+                                 {{"Accept", kCesiumAccept}, {"Accept-Encoding", coding}});
+                REQUIRE(res);
+                REQUIRE(res->status == 200);
+                CAPTURE(x);
+                CAPTURE(y);
+                CAPTURE(coding);
+                CHECK(test::metric(server.port, "tb_cache_bytes") <=
+                      static_cast<double>(options.cache_bytes));
+            }
+        }
+    }
+    CHECK(asked >= 2);
+}
+
 TEST_CASE("terrain tiles: filler at zoom 0, 404 beyond max zoom, 400 outside the scheme, 404 "
           "for a layer without terrain") {
     auto& f = fixture();
