@@ -282,8 +282,9 @@ bool not_modified(const httplib::Request& req, const std::string& etag) {
 // Documents shorter than this are sent as they are: compression would hardly shrink them.
 constexpr std::size_t kMinCompressBytes = 256;
 
-// Sends `blob`; `compress` non-null: it may be compressed (JSON, quantized-mesh), in the
-// coding the client's Accept-Encoding prefers, made once per blob by that service.
+// Sends `blob`; `compress` non-null: it may be compressed (JSON documents, quantized-mesh and
+// 3D Tiles terrain tiles), in the coding the client's Accept-Encoding prefers, made once per
+// blob by that service.
 void send_blob(const httplib::Request& req,
                httplib::Response& res,
                const Blob& blob,

@@ -84,6 +84,13 @@ public:
             return;
         }
         it->second->codings |= bit(coding);
+        if (it->second->charged + size > capacity_) {
+            // With its copies larger than the whole cache: dropped alone, as put() would not
+            // have kept it, instead of evicting every other entry first.
+            erase(it->second);
+            trim();
+            return;
+        }
         it->second->charged += size;
         bytes_ += size;
         trim();
