@@ -201,26 +201,28 @@ TEST_CASE("a terrain tile carries exactly the extensions its Accept header names
     CHECK(plain->body == bare);
 }
 
+// Asks `server` for the terrain tile `id` as CesiumJS does, in `coding` ("identity", "gzip" or
+// "br"); returns the size of the body as sent.
+std::size_t get_coded(const RunningServer& server, const tiler::TileId& id, const char* coding) {
+    auto c = server.client();
+    c.set_decompress(false);
+    auto res =
+        c.Get(terrain_url(id).c_str(), {{"Accept", kCesiumAccept}, {"Accept-Encoding", coding}});
+    REQUIRE(res);
+    REQUIRE(res->status == 200);
+    CHECK(res->get_header_value("Content-Encoding") ==
+          (std::string(coding) == "identity" ? "" : coding));
+    return res->body.size();
+}
+
 TEST_CASE("the gzip and br copies of a cached terrain tile count against cache_mb, once each") {
     auto& f = fixture();
     RunningServer server({{f.layer, {tiler::Format::Terrain}, nullptr}});
-    auto c = server.client();
-    c.set_decompress(false);
     const auto r = f.layer->tiles_at(f.layer->max_zoom());
-    const std::string url = terrain_url({f.layer->max_zoom(), r.x0, r.y0});
-    const auto get = [&](const char* coding) {
-        httplib::Headers h{{"Accept", kCesiumAccept}};
-        if (coding != nullptr) {
-            h.emplace("Accept-Encoding", coding);
-        }
-        auto res = c.Get(url.c_str(), h);
-        REQUIRE(res);
-        REQUIRE(res->status == 200);
-        CHECK(res->get_header_value("Content-Encoding") == (coding ? coding : ""));
-        return res->body.size();
-    };
+    const tiler::TileId id{f.layer->max_zoom(), r.x0, r.y0};
+    const auto get = [&](const char* coding) { return get_coded(server, id, coding); };
     const auto cached = [&] { return test::metric(server.port, "tb_cache_bytes"); };
-    const std::size_t plain = get(nullptr);
+    const std::size_t plain = get("identity");
     const double before = cached();
     CHECK(before > static_cast<double>(plain));
     const std::size_t gzipped = get("gzip");
@@ -241,24 +243,16 @@ TEST_CASE("a gzip or br copy that takes the cache past cache_mb evicts the least
     const tiler::TileId a{z, r.x0, r.y0};
     const tiler::TileId b = r.x1 > r.x0 ? tiler::TileId{z, r.x0 + 1, r.y0}
                                         : tiler::TileId{z, r.x0, r.y0 + 1};
-    const auto ask = [](RunningServer& s, const tiler::TileId& id, const char* coding) {
-        auto c = s.client();
-        c.set_decompress(false);
-        auto res = c.Get(terrain_url(id).c_str(),
-                         {{"Accept", kCesiumAccept}, {"Accept-Encoding", coding}});
-        REQUIRE(res);
-        REQUIRE(res->status == 200);
-    };
     // What each costs, on a server with room for everything.
     double entry_a = 0, entry_b = 0, copies_a = 0;
     {
         RunningServer roomy({{f.layer, {tiler::Format::Terrain}, nullptr}});
-        ask(roomy, a, "identity");
+        get_coded(roomy, a, "identity");
         entry_a = test::metric(roomy.port, "tb_cache_bytes");
-        ask(roomy, b, "identity");
+        get_coded(roomy, b, "identity");
         entry_b = test::metric(roomy.port, "tb_cache_bytes") - entry_a;
-        ask(roomy, a, "gzip");
-        ask(roomy, a, "br");
+        get_coded(roomy, a, "gzip");
+        get_coded(roomy, a, "br");
         copies_a = test::metric(roomy.port, "tb_cache_bytes") - entry_a - entry_b;
     }
     REQUIRE(copies_a > 1);
@@ -266,13 +260,13 @@ TEST_CASE("a gzip or br copy that takes the cache past cache_mb evicts the least
     server::TileServiceOptions options;
     options.cache_bytes = static_cast<std::size_t>(entry_a + entry_b + copies_a) - 1;
     RunningServer server({{f.layer, {tiler::Format::Terrain}, nullptr}}, options);
-    ask(server, a, "identity");
-    ask(server, b, "identity");
+    get_coded(server, a, "identity");
+    get_coded(server, b, "identity");
     CHECK(test::metric(server.port, "tb_cache_entries") == 2);
-    ask(server, a, "gzip");
+    get_coded(server, a, "gzip");
     CHECK(test::metric(server.port, "tb_cache_entries") == 2);
     // The br copy does not fit beside b: b, asked for least recently, goes.
-    ask(server, a, "br");
+    get_coded(server, a, "br");
     CHECK(test::metric(server.port, "tb_cache_entries") == 1);
     CHECK(test::metric(server.port, "tb_cache_bytes") == entry_a + copies_a);
 }
