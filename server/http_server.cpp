@@ -1552,12 +1552,8 @@ struct HttpServer::Impl {
         if (busy(blob, res)) {
             return;
         }
-        send_blob(req,
-                  res,
-                  *blob,
-                  tiler::media_type(tiler::Format::Terrain),
-                  kTileCacheControl,
-                  &tiles);
+        send_blob(
+            req, res, *blob, tiler::media_type(tiler::Format::Terrain), kTileCacheControl, &tiles);
         res.headers.erase("Vary");
         res.set_header("Vary", terrain_vary());
     }

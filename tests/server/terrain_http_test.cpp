@@ -241,8 +241,8 @@ TEST_CASE("a gzip or br copy that takes the cache past cache_mb evicts the least
     const auto r = f.layer->tiles_at(z);
     REQUIRE((r.x1 > r.x0 || r.y1 > r.y0));
     const tiler::TileId a{z, r.x0, r.y0};
-    const tiler::TileId b = r.x1 > r.x0 ? tiler::TileId{z, r.x0 + 1, r.y0}
-                                        : tiler::TileId{z, r.x0, r.y0 + 1};
+    const tiler::TileId b =
+        r.x1 > r.x0 ? tiler::TileId{z, r.x0 + 1, r.y0} : tiler::TileId{z, r.x0, r.y0 + 1};
     // What each costs, on a server with room for everything.
     double entry_a = 0, entry_b = 0, copies_a = 0;
     {
