@@ -7,6 +7,7 @@
 #include "server/tile_service.hpp"
 #include "tiler/cpus.hpp"
 #include "tiler/log.hpp"
+#include "tiler/stores/manifest.hpp"
 #include "tiler/stores/store.hpp"
 
 #include <pthread.h>
@@ -203,6 +204,8 @@ int run(const Args& args) {
                 store = tiler::TileStore::open(*layer.store);
                 log::info("store: " + store->describe());
             }
+            // Tiles made with other settings would publish bounds that are not this layer's.
+            s.store_eps_levels = tiler::prepare_store_for_serving(*store, *s.layer).eps_levels;
             s.store = store;
         }
         log::info("layer " + layer.options.name + ": zooms " + std::to_string(s.layer->min_zoom()) +

@@ -405,8 +405,9 @@ std::shared_ptr<const Blob> TileService::tile(const std::string& layer_name,
         if (promise) {
             // This request leads: look in the store, else queue a generation.
             const tiler::TileKey store_key{layer_name, id, format, eps.level};
+            const bool in_store = served->store && (eps.level < 0 || served->store_eps_levels);
             std::optional<std::string> stored;
-            if (served->store) {
+            if (in_store) {
                 try {
                     stored = served->store->get(store_key); // stores are thread-safe
                 } catch (...) {
@@ -444,51 +445,52 @@ std::shared_ptr<const Blob> TileService::tile(const std::string& layer_name,
                     return nullptr;
                 }
                 ++s.metrics.queued_generations;
-                s.pool.submit([&s, served, &layer, store_key, key, promise, format, eps, id] {
-                    --s.metrics.queued_generations;
-                    ++s.metrics.in_flight_generations;
-                    const auto start = std::chrono::steady_clock::now();
-                    std::shared_ptr<const Blob> made;
-                    std::exception_ptr failure;
-                    try {
-                        made = make_blob(tiler::is_dem_format(format)
-                                             ? tiler::make_dem_tile(layer, id, format)
-                                             : layer.make_tile(id, format, eps));
-                        ++s.metrics.tiles_generated;
-                    } catch (const NotFound& e) {
-                        made = make_failure(404, e.what());
-                        ++s.metrics.tiles_empty;
-                    } catch (const InputError& e) {
-                        // Deterministic for this tile and eps: remember it, don't remesh.
-                        made = make_failure(400, e.what());
-                    } catch (...) {
-                        failure = std::current_exception();
-                    }
-                    s.metrics.generation_micros += static_cast<std::uint64_t>(
-                        std::chrono::duration_cast<std::chrono::microseconds>(
-                            std::chrono::steady_clock::now() - start)
-                            .count());
-                    --s.metrics.in_flight_generations;
-                    if (made && made->failure == 0 && served->store) {
+                s.pool.submit(
+                    [&s, served, &layer, store_key, in_store, key, promise, format, eps, id] {
+                        --s.metrics.queued_generations;
+                        ++s.metrics.in_flight_generations;
+                        const auto start = std::chrono::steady_clock::now();
+                        std::shared_ptr<const Blob> made;
+                        std::exception_ptr failure;
                         try {
-                            served->store->put(store_key, made->bytes);
-                        } catch (const std::exception& e) {
-                            ++s.metrics.store_write_failures;
-                            log::warn(std::string("tile not stored: ") + e.what());
+                            made = make_blob(tiler::is_dem_format(format)
+                                                 ? tiler::make_dem_tile(layer, id, format)
+                                                 : layer.make_tile(id, format, eps));
+                            ++s.metrics.tiles_generated;
+                        } catch (const NotFound& e) {
+                            made = make_failure(404, e.what());
+                            ++s.metrics.tiles_empty;
+                        } catch (const InputError& e) {
+                            // Deterministic for this tile and eps: remember it, don't remesh.
+                            made = make_failure(400, e.what());
+                        } catch (...) {
+                            failure = std::current_exception();
                         }
-                    }
-                    if (made) {
-                        s.cache.put(key, made);
-                    }
-                    std::lock_guard<std::mutex> lock(s.flight_mutex);
-                    --s.pending;
-                    if (failure) {
-                        promise->set_exception(failure);
-                    } else {
-                        promise->set_value(made);
-                    }
-                    s.flights.erase(key);
-                });
+                        s.metrics.generation_micros += static_cast<std::uint64_t>(
+                            std::chrono::duration_cast<std::chrono::microseconds>(
+                                std::chrono::steady_clock::now() - start)
+                                .count());
+                        --s.metrics.in_flight_generations;
+                        if (made && made->failure == 0 && in_store) {
+                            try {
+                                served->store->put(store_key, made->bytes);
+                            } catch (const std::exception& e) {
+                                ++s.metrics.store_write_failures;
+                                log::warn(std::string("tile not stored: ") + e.what());
+                            }
+                        }
+                        if (made) {
+                            s.cache.put(key, made);
+                        }
+                        std::lock_guard<std::mutex> lock(s.flight_mutex);
+                        --s.pending;
+                        if (failure) {
+                            promise->set_exception(failure);
+                        } else {
+                            promise->set_value(made);
+                        }
+                        s.flights.erase(key);
+                    });
             }
         }
         // Leaves the count of waiting requests however get() returns. A lead that found its tile

@@ -26,6 +26,8 @@ struct ServedLayer {
     std::shared_ptr<const tiler::Layer> layer;
     std::vector<tiler::Format> formats;      // the formats served; others are 404
     std::shared_ptr<tiler::TileStore> store; // may be null; may be shared between layers
+    // Whether tiles at eps levels (EpsChoice::level >= 0) go to the store too (StoreUse).
+    bool store_eps_levels = true;
 };
 
 struct TileServiceOptions {

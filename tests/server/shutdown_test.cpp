@@ -34,11 +34,9 @@ struct Child {
     }
 };
 
-// Starts TB_BINARY serve ARGS... --port 0 with stderr to `log`; returns the port from its
-// startup line.
-int start_server(Child& child, std::vector<std::string> args, const std::string& log) {
-    args.insert(args.begin(), {TB_BINARY, "serve"});
-    args.insert(args.end(), {"--port", "0"});
+// Starts `terrabound ARGS...` with stderr to `log`.
+void spawn(Child& child, std::vector<std::string> args, const std::string& log) {
+    args.insert(args.begin(), TB_BINARY);
     child.pid = fork();
     REQUIRE(child.pid >= 0);
     if (child.pid == 0) {
@@ -52,6 +50,14 @@ int start_server(Child& child, std::vector<std::string> args, const std::string&
         execv(TB_BINARY, argv.data());
         _exit(127);
     }
+}
+
+// Starts TB_BINARY serve ARGS... --port 0 with stderr to `log`; returns the port from its
+// startup line.
+int start_server(Child& child, std::vector<std::string> args, const std::string& log) {
+    args.insert(args.begin(), "serve");
+    args.insert(args.end(), {"--port", "0"});
+    spawn(child, args, log);
     const std::regex serving(R"(serving http://127\.0\.0\.1:(\d+)/)");
     for (int i = 0; i < 1000; ++i) {
         std::smatch m;
@@ -68,6 +74,13 @@ int start_server(Child& child, std::vector<std::string> args, const std::string&
     }
     FAIL("terrabound serve did not start: " << test::read_file(log));
     return -1;
+}
+
+// Runs `terrabound ARGS...` to its end with stderr to `log`; returns its exit code.
+int run_to_exit(const std::vector<std::string>& args, const std::string& log) {
+    Child child;
+    spawn(child, args, log);
+    return child.wait_exit();
 }
 
 } // namespace
@@ -199,18 +212,69 @@ TEST_CASE("terrabound serve DEM... makes one layer per file, and --store keeps i
 TEST_CASE("terrabound serve with a missing DEM exits 2 naming it") {
     test::TempDir dir;
     const std::string missing = dir / "nope.hgt";
-    Child child;
-    child.pid = fork();
-    REQUIRE(child.pid >= 0);
-    if (child.pid == 0) {
-        const int fd = open((dir / "log").c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-        dup2(fd, 2);
-        execl(TB_BINARY, TB_BINARY, "serve", missing.c_str(), static_cast<char*>(nullptr));
-        _exit(127);
-    }
-    CHECK(child.wait_exit() == 2);
+    CHECK(run_to_exit({"serve", missing}, dir / "log") == 2);
     const std::string log = test::read_file(dir / "log");
     INFO(log);
     CHECK(log.find(missing) != std::string::npos);
     CHECK(log.find("serving") == std::string::npos);
+}
+
+TEST_CASE("terrabound serve replaces its own stored tiles when the eps changes, and refuses a "
+          "built store made with another eps") {
+    test::TempDir dir;
+    test::write_dem(dir / "hills.asc", 129);
+    const auto config = [&](const std::string& name, double eps, const std::string& store) {
+        const std::string path = dir / name;
+        test::write_file(path,
+                         R"({"layers": [{"name": "hills", "sources": ["hills.asc"], "tile_size": 64,
+                              "min_zoom": 6, "max_zoom": 7, "finest_eps": )" +
+                             std::to_string(eps) + R"(, "store": ")" + store + R"("}]})");
+        return path;
+    };
+    const std::string url = "/hills/7/136/104.glb"; // the tile holding 11.5 E, 57.5 N
+    const auto serve_once = [&](const std::string& cfg, const std::string& log) {
+        Child child;
+        const int port = start_server(child, {cfg}, log);
+        httplib::Client c("127.0.0.1", port);
+        auto tile = c.Get(url);
+        REQUIRE(tile);
+        REQUIRE(tile->status == 200);
+        REQUIRE(kill(child.pid, SIGTERM) == 0);
+        CHECK(child.wait_exit() == 0);
+        return tile->body;
+    };
+
+    const std::string first = serve_once(config("fine.json", 1, "tiles"), dir / "fine.log");
+    CHECK(test::read_file(dir / "tiles" + url) == first);
+    const std::string second = serve_once(config("coarse.json", 40, "tiles"), dir / "coarse.log");
+    const std::string log = test::read_file(dir / "coarse.log");
+    INFO(log);
+    CHECK(log.find("holds tiles made with other settings (eps was [2, 1], now [80, 40]); "
+                   "removing them") != std::string::npos);
+    CHECK(second != first);
+    CHECK(test::read_file(dir / "tiles" + url) == second);
+
+    // A store `terrabound build` made at eps 1 is not served at eps 40.
+    REQUIRE(run_to_exit({"build",
+                         dir / "hills.asc",
+                         "-o",
+                         dir / "built.sqlite",
+                         "--layer",
+                         "hills",
+                         "--size",
+                         "64",
+                         "--min-zoom",
+                         "6",
+                         "--max-zoom",
+                         "7",
+                         "--eps-finest",
+                         "1"},
+                        dir / "build.log") == 0);
+    CHECK(run_to_exit({"serve", config("coarse.json", 40, "built.sqlite"), "--port", "0"},
+                      dir / "refused.log") == 2);
+    const std::string why = test::read_file(dir / "refused.log");
+    INFO(why);
+    CHECK(why.find("its tiles were made by terrabound build with other settings (eps was [2, 1], "
+                   "now [80, 40])") != std::string::npos);
+    CHECK(why.find("serving") == std::string::npos);
 }

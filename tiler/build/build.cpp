@@ -12,6 +12,7 @@
 #include "tiler/dem_tiles.hpp"
 #include "tiler/json_number.hpp"
 #include "tiler/log.hpp"
+#include "tiler/stores/manifest.hpp"
 #include "tiler/stores/store.hpp"
 
 #include <algorithm>
@@ -22,24 +23,17 @@
 #include <cstdlib>
 #include <deque>
 #include <exception>
-#include <filesystem>
 #include <map>
 #include <mutex>
 #include <sstream>
-#include <sys/stat.h>
 #include <thread>
 #include <unistd.h>
-
-#ifndef TB_VERSION
-#define TB_VERSION "0.0.0"
-#endif
 
 namespace tb::tiler {
 namespace {
 
 using Clock = std::chrono::steady_clock;
 
-constexpr const char* kManifest = "build-manifest.json";
 constexpr std::size_t kBatchTiles = 64;  // tiles per SQLite transaction
 constexpr double kBatchSeconds = 1.0;    // ... or this long since the last commit
 constexpr double kLogEverySeconds = 5.0; // progress lines when stderr is no terminal
@@ -53,59 +47,14 @@ std::string tile_name(const TileId& id) {
     return std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
 }
 
-std::string json_string(std::string_view s) {
-    std::string out = "\"";
-    for (unsigned char c : s) {
-        if (c == '"' || c == '\\') {
-            out += '\\';
-            out += static_cast<char>(c);
-        } else if (c < 0x20) {
-            char buf[8];
-            std::snprintf(buf, sizeof buf, "\\u%04x", c);
-            out += buf;
-        } else {
-            out += static_cast<char>(c);
-        }
-    }
-    return out + "\"";
-}
-
-// ---- the manifest: one "key": value per line, in a fixed order, no timestamps (so that
-// shards starting together write identical bytes) ----
-
-std::string source_entry(const std::string& source) {
-    std::string path = source;
-    std::string extra;
-    struct stat st {};
-    if (source.rfind("/vsi", 0) != 0 && ::stat(source.c_str(), &st) == 0) {
-        std::error_code ec;
-        const auto abs = std::filesystem::weakly_canonical(source, ec);
-        if (!ec) {
-            path = abs.string();
-        }
-        extra = ", \"size\": " + std::to_string(st.st_size) +
-                ", \"mtime\": " + std::to_string(static_cast<long long>(st.st_mtime));
-    }
-    return "{\"path\": " + json_string(path) + extra + "}";
-}
-
-using Manifest = std::vector<std::pair<std::string, std::string>>; // key, JSON value
-
+// The build manifest: what decides the tiles' bytes (tiler/stores/manifest.hpp), then what
+// decides which tiles there are.
 Manifest make_manifest(const BuildOptions& o, const Layer& layer, int shard_count) {
     Manifest m;
     m.emplace_back("terrabound_build", "1");
-    m.emplace_back("version", json_string(TB_VERSION));
-    m.emplace_back("layer", json_string(o.layer.name));
-    std::string sources = "[";
-    for (std::size_t i = 0; i < o.layer.sources.size(); ++i) {
-        sources += (i ? ", " : "") + source_entry(o.layer.sources[i]);
+    for (auto& entry : tile_settings(layer)) {
+        m.push_back(std::move(entry));
     }
-    m.emplace_back("sources", sources + "]");
-    m.emplace_back("scheme", json_string(to_string(o.layer.scheme)));
-    m.emplace_back("tile_size", std::to_string(o.layer.tile_size));
-    m.emplace_back("datum", json_string(to_string(layer.source_datum())));
-    m.emplace_back("min_zoom", std::to_string(layer.min_zoom()));
-    m.emplace_back("max_zoom", std::to_string(layer.max_zoom()));
     if (o.bbox) {
         m.emplace_back("bbox",
                        "[" + json_number(o.bbox->west) + ", " + json_number(o.bbox->south) + ", " +
@@ -118,59 +67,8 @@ Manifest make_manifest(const BuildOptions& o, const Layer& layer, int shard_coun
         formats += std::string(i ? ", " : "") + json_string(format_name(o.formats[i]));
     }
     m.emplace_back("formats", formats + "]");
-    if (std::any_of(o.formats.begin(), o.formats.end(), is_dem_format)) {
-        // Only with DEM formats, so manifests of mesh-only builds stay as they were.
-        const DemTilePlan dem = dem_tile_plan(layer);
-        m.emplace_back("dem_tile_size", std::to_string(dem.tile_size));
-        m.emplace_back("dem_heights", json_string(to_string(o.layer.dem_heights)));
-        m.emplace_back("dem_min_zoom", std::to_string(dem.min_zoom));
-        m.emplace_back("dem_max_zoom", std::to_string(dem.max_zoom));
-    }
-    std::string eps = "[";
-    for (int z = layer.min_zoom(); z <= layer.max_zoom(); ++z) {
-        eps += (z > layer.min_zoom() ? ", " : "") + json_number(layer.eps_for_zoom(z));
-    }
-    m.emplace_back("eps", eps + "]");
     m.emplace_back("shard_count", std::to_string(shard_count));
     return m;
-}
-
-std::string manifest_text(const Manifest& m) {
-    std::string out = "{\n";
-    for (std::size_t i = 0; i < m.size(); ++i) {
-        out +=
-            "  " + json_string(m[i].first) + ": " + m[i].second + (i + 1 < m.size() ? ",\n" : "\n");
-    }
-    return out + "}\n";
-}
-
-Manifest parse_manifest(const std::string& text) {
-    Manifest m;
-    std::istringstream in(text);
-    std::string line;
-    while (std::getline(in, line)) {
-        const auto q0 = line.find('"');
-        const auto q1 = q0 == std::string::npos ? q0 : line.find('"', q0 + 1);
-        const auto colon = q1 == std::string::npos ? q1 : line.find(": ", q1);
-        if (colon == std::string::npos) {
-            continue;
-        }
-        std::string value = line.substr(colon + 2);
-        if (!value.empty() && value.back() == ',') {
-            value.pop_back();
-        }
-        m.emplace_back(line.substr(q0 + 1, q1 - q0 - 1), value);
-    }
-    return m;
-}
-
-std::string lookup(const Manifest& m, const std::string& key) {
-    for (const auto& [k, v] : m) {
-        if (k == key) {
-            return v;
-        }
-    }
-    return "(absent)";
 }
 
 // Throws InputError naming the first parameter that differs. shard_count is checked only
@@ -179,16 +77,18 @@ void compare_manifests(const Manifest& was,
                        const Manifest& now,
                        bool check_shards,
                        const std::string& where) {
-    for (const auto& [key, value] : now) {
-        if (key == "shard_count" && !check_shards) {
-            continue;
-        }
-        const std::string old = lookup(was, key);
-        if (old != value) {
-            throw InputError(where + ": the existing build was made with different parameters: " +
-                             key + " was " + old + ", now " + value +
-                             "; rerun with the same parameters, or use --force to start over");
-        }
+    std::vector<std::string> ignore;
+    if (!check_shards) {
+        ignore.emplace_back("shard_count");
+    }
+    if (const auto change = first_change(was, now, ignore)) {
+        const std::string fix =
+            change->key == "version"
+                ? "a build cannot be continued by another terrabound version; "
+                  "use --force to start over"
+                : "rerun with the same parameters, or use --force to start over";
+        throw InputError(where + ": the existing build was made with different parameters: " +
+                         change->key + " was " + change->was + ", now " + change->now + "; " + fix);
     }
 }
 
@@ -792,14 +692,14 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
     auto store = TileStore::open(o.output);
     const std::string where = o.output + " (layer " + name + ")";
 
-    const auto existing = store->get_document(name, kManifest);
+    const auto existing = store->get_document(name, kBuildManifest);
     int shard_count = o.shard ? o.shard->count : 1;
     if (o.finalize && existing) {
         // --finalize learns N from the shards' manifest.
-        const std::string n = lookup(parse_manifest(*existing), "shard_count");
+        const std::string n = manifest_value(parse_manifest(*existing), "shard_count");
         const auto r = std::from_chars(n.data(), n.data() + n.size(), shard_count);
         if (r.ec != std::errc() || shard_count < 1) {
-            throw IoError(where + ": " + std::string(kManifest) +
+            throw IoError(where + ": " + std::string(kBuildManifest) +
                           " has no valid shard_count; "
                           "it was not written by this terrabound; use --force to start over");
         }
@@ -815,11 +715,11 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
             const Manifest was = parse_manifest(*existing);
             compare_manifests(was, manifest, o.shard || o.finalize, where);
         } else if (store->has_layer(name)) {
-            throw InputError(where + ": holds files but no " + std::string(kManifest) +
+            throw InputError(where + ": holds files but no " + std::string(kBuildManifest) +
                              ", so it was not made by terrabound build; use --force to overwrite "
                              "or choose another output");
         } else if (o.finalize) {
-            throw InputError(where + ": nothing to finalize (no " + std::string(kManifest) +
+            throw InputError(where + ": nothing to finalize (no " + std::string(kBuildManifest) +
                              "); run the shards first");
         }
     } else if (store->has_layer(name)) {
@@ -827,7 +727,7 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
                          "); use --resume to continue or --force to overwrite");
     }
     if (!existing || o.force) {
-        store->put_document(name, kManifest, manifest_text(manifest));
+        store->put_document(name, kBuildManifest, manifest_text(manifest));
     }
 
     const Plan plan = make_plan(*layer, o);

@@ -1,0 +1,242 @@
+// Store manifests: a store's tiles are served only under the settings that made them
+// (tiler/stores/manifest.hpp). Real layers on a generated DEM, both stores.
+#include "core/error.hpp"
+#include "tests/tiler/test_raster_util.hpp"
+#include "tiler/build/build.hpp"
+#include "tiler/stores/manifest.hpp"
+
+#include <doctest/doctest.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <thread>
+
+using namespace tb::tiler;
+using tb_test::ScratchDir;
+
+namespace {
+
+// 65 x 65 heights over a quarter degree in the Alps: a hill on a slope.
+std::string write_hill(const std::string& path, double peak = 500) {
+    tb_test::Fixture f;
+    f.width = f.height = 65;
+    f.epsg = 4326;
+    f.geotransform = std::array<double, 6>{7.0, 0.25 / 64, 0, 46.25, 0, -0.25 / 64};
+    for (int r = 0; r < 65; ++r) {
+        for (int c = 0; c < 65; ++c) {
+            const double x = c / 64.0 - 0.5, y = r / 64.0 - 0.5;
+            f.values.push_back(900 + 3 * c + peak * std::exp(-(x * x + y * y) * 12));
+        }
+    }
+    return tb_test::write_fixture(path, f);
+}
+
+LayerOptions small_options(const std::string& dem) {
+    LayerOptions o;
+    o.name = "hill";
+    o.sources = {dem};
+    o.tile_size = 32;
+    o.min_zoom = 8;
+    o.max_zoom = 9;
+    return o;
+}
+
+const TileKey kTile{"hill", {9, 532, 387}, Format::Glb, -1}; // holds 7.1 E, 46.1 N
+
+// The stores both kinds of path open: a directory and an SQLite file.
+std::vector<std::string> store_paths(const ScratchDir& dir) {
+    return {dir.file("tiles"), dir.file("tiles.sqlite")};
+}
+
+} // namespace
+
+TEST_CASE("serve writes its manifest into an empty store, then keeps the tiles while the "
+          "settings stay") {
+    ScratchDir dir;
+    const auto layer = Layer::open(small_options(write_hill(dir.file("hill.tif"))));
+    for (const auto& path : store_paths(dir)) {
+        INFO(path);
+        {
+            auto store = TileStore::open(path);
+            prepare_store_for_serving(*store, *layer);
+            const auto text = store->get_document("hill", kServeManifest);
+            REQUIRE(text);
+            CHECK(*text == manifest_text(tile_settings(*layer)));
+            CHECK(manifest_value(parse_manifest(*text), "eps") ==
+                  manifest_value(tile_settings(*layer), "eps"));
+            store->put(kTile, "tile bytes");
+        }
+        // A restart with the same settings, on a layer opened anew.
+        auto store = TileStore::open(path);
+        prepare_store_for_serving(*store, *Layer::open(small_options(dir.file("hill.tif"))));
+        CHECK(store->get(kTile) == std::optional<std::string>("tile bytes"));
+    }
+}
+
+TEST_CASE("a server's cached tiles made with another eps, eps level, nodata or DEM are removed "
+          "before any is served") {
+    ScratchDir dir;
+    const std::string dem = write_hill(dir.file("hill.tif"));
+    const LayerOptions base = small_options(dem);
+
+    struct Case {
+        const char* what;
+        const char* key; // the setting the warning names
+        LayerOptions options;
+    };
+    std::vector<Case> cases;
+    LayerOptions o = base;
+    o.finest_eps = 0.5;
+    cases.push_back({"finer eps", "eps", o});
+    o = base;
+    o.eps_levels = {1, 4};
+    cases.push_back({"eps levels", "eps_levels", o});
+    o = base;
+    o.nodata = 900;
+    cases.push_back({"a nodata value", "nodata", o});
+    o = base;
+    o.tile_size = 64;
+    cases.push_back({"another tile size", "tile_size", o});
+
+    for (const auto& path : store_paths(dir)) {
+        for (const auto& c : cases) {
+            INFO(path << ": " << c.what);
+            auto store = TileStore::open(path);
+            store->remove_layer("hill");
+            prepare_store_for_serving(*store, *Layer::open(base));
+            store->put(kTile, "made with the base settings");
+            const auto changed = Layer::open(c.options);
+            const auto change =
+                first_change(parse_manifest(*store->get_document("hill", kServeManifest)),
+                             tile_settings(*changed));
+            REQUIRE(change);
+            CHECK(change->key == c.key);
+            prepare_store_for_serving(*store, *changed);
+            CHECK_FALSE(store->contains(kTile));
+            CHECK(store->get_document("hill", kServeManifest) ==
+                  std::optional<std::string>(manifest_text(tile_settings(*changed))));
+        }
+    }
+
+    // Cached by another Terrabound (or commit).
+    for (const auto& path : store_paths(dir)) {
+        INFO(path << ": another version");
+        auto store = TileStore::open(path);
+        store->remove_layer("hill");
+        const auto layer = Layer::open(base);
+        prepare_store_for_serving(*store, *layer);
+        store->put(kTile, "made by another version");
+        std::string older = *store->get_document("hill", kServeManifest);
+        older.insert(older.find("\"version\": \"") + 12, "0.0.9-");
+        store->put_document("hill", kServeManifest, older);
+        prepare_store_for_serving(*store, *layer);
+        CHECK_FALSE(store->contains(kTile));
+    }
+
+    // The DEM replaced in place, same name: its size or mtime tells.
+    auto store = TileStore::open(dir.file("replaced.sqlite"));
+    prepare_store_for_serving(*store, *Layer::open(base));
+    store->put(kTile, "made from the first DEM");
+    std::this_thread::sleep_for(std::chrono::milliseconds(1100)); // mtime has 1 s resolution
+    write_hill(dem, 700);
+    const auto replaced = Layer::open(base);
+    const auto change = first_change(parse_manifest(*store->get_document("hill", kServeManifest)),
+                                     tile_settings(*replaced));
+    REQUIRE(change);
+    CHECK(change->key == "sources");
+    prepare_store_for_serving(*store, *replaced);
+    CHECK_FALSE(store->contains(kTile));
+}
+
+TEST_CASE("a built store is served only with the settings it was built with; its bbox, "
+          "formats and shards do not matter") {
+    ScratchDir dir;
+    const std::string dem = write_hill(dir.file("hill.tif"));
+    for (const auto& path : store_paths(dir)) {
+        INFO(path);
+        BuildOptions b;
+        b.layer = small_options(dem);
+        b.layer.finest_eps = 2;
+        b.output = path;
+        b.formats = {Format::Glb, Format::Terrain};
+        b.bbox = LonLatBox{7.0, 46.0, 7.1, 46.1};
+        b.threads = 1;
+        b.progress = ProgressMode::Off;
+        const std::atomic<bool> stop{false};
+        const BuildSummary summary = build_pyramid(b, stop);
+        REQUIRE(summary.written > 0);
+        auto store = TileStore::open(path);
+        const auto built = store->get_document("hill", kBuildManifest);
+        REQUIRE(built);
+
+        // Other settings: refused, naming the setting and both values; nothing removed.
+        LayerOptions other = b.layer;
+        other.finest_eps = 3;
+        CHECK_THROWS_WITH_AS(
+            prepare_store_for_serving(*store, *Layer::open(other)),
+            doctest::Contains("made by terrabound build with other settings (eps was [4, 2], now "
+                              "[6, 3])"),
+            tb::InputError);
+        CHECK(store->get_document("hill", kBuildManifest) == built);
+        CHECK_FALSE(store->get_document("hill", kServeManifest));
+
+        // The build's own settings: served as they are, its tiles kept.
+        const TileKey tile{"hill", {9, 532, 387}, Format::Glb, -1};
+        REQUIRE(store->contains(tile));
+        CHECK(prepare_store_for_serving(*store, *Layer::open(b.layer)).eps_levels);
+        CHECK(store->get_document("hill", kBuildManifest) == built);
+        CHECK_FALSE(store->get_document("hill", kServeManifest));
+
+        // Eps levels the build had not: its tiles served, those levels kept out of the store.
+        LayerOptions levels = b.layer;
+        levels.eps_levels = {1, 5};
+        CHECK_FALSE(prepare_store_for_serving(*store, *Layer::open(levels)).eps_levels);
+
+        // Built by another Terrabound to the same settings: served, tiles kept.
+        std::string older = *built;
+        const auto at = older.find("\"version\": \"");
+        REQUIRE(at != std::string::npos);
+        older.insert(at + 12, "0.0.9-");
+        store->put_document("hill", kBuildManifest, older);
+        CHECK(prepare_store_for_serving(*store, *Layer::open(b.layer)).eps_levels);
+        CHECK(store->contains(tile));
+    }
+}
+
+TEST_CASE("tiles with no manifest are refused and left where they are") {
+    ScratchDir dir;
+    const auto layer = Layer::open(small_options(write_hill(dir.file("hill.tif"))));
+    for (const auto& path : store_paths(dir)) {
+        INFO(path);
+        auto store = TileStore::open(path);
+        store->put(kTile, "whose?");
+        CHECK_THROWS_WITH_AS(prepare_store_for_serving(*store, *layer),
+                             doctest::Contains("holds tiles but no serve-manifest.json or "
+                                               "build-manifest.json"),
+                             tb::InputError);
+        CHECK(store->get(kTile) == std::optional<std::string>("whose?"));
+    }
+}
+
+TEST_CASE("entries older manifests lack read as their defaults") {
+    const Manifest now = {
+        {"eps", "[2]"}, {"eps_levels", "[]"}, {"nodata", "null"}, {"dem_tile_size", "512"}};
+    CHECK_FALSE(first_change({{"eps", "[2]"}}, now));
+    CHECK_FALSE(first_change(parse_manifest(manifest_text(now)), now));
+    // A DEM entry that is there is compared; a set nodata is not the default.
+    const auto dem = first_change({{"eps", "[2]"}, {"dem_tile_size", "256"}}, now);
+    REQUIRE(dem);
+    CHECK(dem->key == "dem_tile_size");
+    const Manifest with_nodata = {{"eps", "[2]"}, {"nodata", "-32768"}};
+    const auto nodata = first_change({{"eps", "[2]"}}, with_nodata);
+    REQUIRE(nodata);
+    CHECK(nodata->was == "null");
+    CHECK(nodata->now == "-32768");
+    // Anything else absent is a change.
+    const auto eps = first_change({}, now);
+    REQUIRE(eps);
+    CHECK(eps->was == "(absent)");
+    // Ignored keys are not compared.
+    CHECK_FALSE(first_change({{"eps", "[1]"}}, {{"eps", "[2]"}}, {"eps"}));
+}

@@ -1,0 +1,69 @@
+#pragma once
+// What made a store's tiles. Beside each layer's tiles a store keeps a manifest document: the
+// settings that decide the tiles' bytes (and so the error bound each tile was made to), one
+// "key": JSON value per line in a fixed order, with no timestamps, so that processes starting
+// together write identical bytes.
+//   build-manifest.json  written by `terrabound build` before its first tile (build.hpp);
+//   serve-manifest.json  written by `terrabound serve` when it first keeps a tile in a store.
+// Before a store's tiles are handed out or added to, the manifest is compared with the layer's
+// settings now: a tile made for another eps, DEM or Terrabound version would publish a bound
+// that is not this layer's.
+#include "tiler/layer.hpp"
+#include "tiler/stores/store.hpp"
+
+#include <optional>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+namespace tb::tiler {
+
+inline constexpr const char* kBuildManifest = "build-manifest.json";
+inline constexpr const char* kServeManifest = "serve-manifest.json";
+
+using Manifest = std::vector<std::pair<std::string, std::string>>; // key, JSON value
+
+// The entries that decide the bytes of every tile the layer makes, in this order: version (the
+// revision: "0.1.0", plus "+g<commit>" when built from a git checkout),
+// layer, sources (absolute path, size and mtime of each local file), scheme, tile_size, datum,
+// min_zoom, max_zoom, eps (the ladder, one per zoom), eps_levels, nodata, and the DEM pyramid's
+// dem_tile_size, dem_heights, dem_min_zoom, dem_max_zoom.
+Manifest tile_settings(const Layer& layer);
+
+std::string manifest_text(const Manifest& m);
+// Reads what manifest_text wrote; lines that are not "key": value are skipped.
+Manifest parse_manifest(const std::string& text);
+// The value of `key`, or "(absent)".
+std::string manifest_value(const Manifest& m, const std::string& key);
+
+struct ManifestChange {
+    std::string key, was, now;
+};
+// The first entry of `now` (in its order) whose value in `was` differs, skipping `ignore`d keys.
+// Entries older manifests lack compare as their defaults: eps_levels [], nodata null; the
+// dem_* entries, which older builds wrote only with DEM formats, are skipped when absent.
+std::optional<ManifestChange>
+first_change(const Manifest& was, const Manifest& now, const std::vector<std::string>& ignore = {});
+
+// How a server may use a store it serves a layer from.
+struct StoreUse {
+    // Whether tiles at the layer's extra eps levels (EpsChoice::level >= 0) may be kept there.
+    // A build has none, and the index k of another eps_levels list names another eps, so a
+    // built store keeps only the layer's ladder tiles unless its eps_levels are the layer's.
+    bool eps_levels = true;
+};
+
+// Makes `store` ready to serve `layer`'s tiles, before any is read or written:
+//   - a build manifest must match the layer's tile settings (its bbox, formats, shards and
+//     eps_levels aside), else InputError naming the setting, both values and the ways out;
+//     when only the Terrabound version differs, the tiles are served with a warning line;
+//   - a serve manifest that does not match means the tiles are an earlier server's cache made
+//     with other settings: they are removed (one warning line), and the new manifest written;
+//   - tiles with no manifest at all: InputError (they may not be Terrabound's, so they are not
+//     deleted on a guess);
+//   - an empty layer gets a serve manifest.
+// IoError when the store cannot be read or written.
+StoreUse prepare_store_for_serving(TileStore& store, const Layer& layer);
+
+} // namespace tb::tiler
