@@ -205,11 +205,7 @@ public:
                                  "': globe terrain tiles have only their zoom's eps "
                                  "(CesiumJS picks levels itself); drop ?eps");
             }
-            TerrainTile tile = terrain_tile(id, format);
-            if (format == Format::Terrain) {
-                return encode_quantized_mesh(tile.mesh, tile.extras);
-            }
-            return encode_terrain_glb(tile);
+            return encode_terrain(terrain_draft(id), id, format);
         }
         double value = 0;
         if (eps.level < 0) {
@@ -223,6 +219,61 @@ public:
                              std::to_string(options_.eps_levels.size()) + ")");
         }
         return make_tile_at(id, format, value);
+    }
+
+    std::vector<std::pair<Format, std::string>>
+    make_tiles(const TileId& id, std::span<const Format> formats) const override {
+        for (const Format format : formats) {
+            if (is_dem_format(format)) {
+                throw InputError(std::string("make_tiles: ") + format_name(format) +
+                                 " tiles are DEM tiles (make_dem_tile)");
+            }
+        }
+        // Each mesh once: glb and drc share mesh_tile_at's, terrain and terrain3d a draft. The
+        // first is dropped before the second is made, so only one is held at a time.
+        std::vector<std::optional<std::string>> made(formats.size());
+        {
+            std::optional<MeshedTile> meshed;
+            std::vector<std::array<double, 3>> normals;
+            for (std::size_t k = 0; k < formats.size(); ++k) {
+                if (is_terrain_format(formats[k])) {
+                    continue;
+                }
+                if (!meshed) {
+                    try {
+                        check_id(id);
+                        meshed = mesh_tile_at(id, eps_for_zoom(id.z));
+                    } catch (const NotFound&) {
+                        break; // no data here: no glb, no drc
+                    }
+                    if (meshed->mesh.triangle_count() > 0) {
+                        normals = vertex_normals(*meshed, id);
+                    }
+                }
+                made[k] = encode_meshed(*meshed, normals, id, formats[k], eps_for_zoom(id.z));
+            }
+        }
+        std::optional<TerrainDraft> draft;
+        for (std::size_t k = 0; k < formats.size(); ++k) {
+            if (!is_terrain_format(formats[k])) {
+                continue;
+            }
+            if (!draft) {
+                try {
+                    draft = terrain_draft(id);
+                } catch (const NotFound&) {
+                    break; // beyond the layer's max zoom: no terrain tile
+                }
+            }
+            made[k] = encode_terrain(*draft, id, formats[k]);
+        }
+        std::vector<std::pair<Format, std::string>> out;
+        for (std::size_t k = 0; k < formats.size(); ++k) {
+            if (made[k]) {
+                out.emplace_back(formats[k], std::move(*made[k]));
+            }
+        }
+        return out;
     }
 
     TileRaster make_raster(const TileId& id) const override;
@@ -239,13 +290,22 @@ public:
     // measures, and the normals would cost another read of the source).
     std::string encode_at(const TileId& id, Format format, double eps, bool with_normals) const {
         const MeshedTile t = mesh_tile_at(id, eps);
-        EncodeReport report;
         // Shading normals, the same function of position as the terrain tiles' (encode_tile
         // neither adds nor reorders vertices, so they stay aligned with the mesh).
         std::vector<std::array<double, 3>> normals;
         if (with_normals && t.mesh.triangle_count() > 0) {
             normals = vertex_normals(t, id);
         }
+        return encode_meshed(t, normals, id, format, eps);
+    }
+
+    // A meshed tile encoded as glb or drc, with `normals` (none when empty).
+    std::string encode_meshed(const MeshedTile& t,
+                              const std::vector<std::array<double, 3>>& normals,
+                              const TileId& id,
+                              Format format,
+                              double eps) const {
+        EncodeReport report;
         std::string bytes = encode_tile(t.raster,
                                         t.mesh,
                                         format,
@@ -416,11 +476,18 @@ private:
                            }};
     }
 
-    // A globe terrain tile's content (tiler/formats/terrain_tiles.hpp), encoded as
-    // quantized-mesh or 3D Tiles terrain: meshed from the DEM where the layer has data, flat
-    // filler on the geoid elsewhere at zooms up to max_zoom (CesiumJS never asks for a tile whose
-    // parent is missing). Only what `format` (terrain or terrain3d) encodes is measured and made.
-    TerrainTile terrain_tile(const TileId& id, Format format) const {
+    // What a globe terrain tile's two formats (quantized-mesh and 3D Tiles terrain) share: the
+    // mesh, quantized, with its normals, or flat filler.
+    struct TerrainDraft {
+        TerrainTile tile;     // without what only one format carries
+        MeshedTile meshed;    // what it was made from (empty for filler)
+        double quantized = 0; // the quantized mesh's largest error at the samples, metres
+    };
+
+    // A globe terrain tile's content (tiler/formats/terrain_tiles.hpp): meshed from the DEM
+    // where the layer has data, flat filler on the geoid elsewhere at zooms up to max_zoom
+    // (CesiumJS never asks for a tile whose parent is missing).
+    TerrainDraft terrain_draft(const TileId& id) const {
         if (options_.scheme != Scheme::Geodetic) {
             throw InputError("layer '" + options_.name +
                              "': globe terrain needs the geodetic scheme");
@@ -434,49 +501,46 @@ private:
                            "''s max zoom " + std::to_string(max_zoom_) +
                            " (clients upsample its parent)");
         }
-        const TerrainSpec spec = terrain_spec();
         const LonLatBox bounds = tile_bounds(options_.scheme, id);
         if (may_have_tile(id)) {
             try {
-                return data_terrain(id, spec, bounds, format);
+                return data_terrain(id, bounds);
             } catch (const NotFound&) {
                 // no source pixel centre lies in the tile: filler
             }
         }
         const TileMesh filler = terrain_filler(bounds);
-        TerrainTile tile;
+        TerrainDraft draft;
+        TerrainTile& tile = draft.tile;
         tile.filler = true;
         tile.extras.normals.resize(filler.vertex_count());
         for (std::size_t v = 0; v < filler.vertex_count(); ++v) {
             tile.extras.normals[v] = up_vector(filler.x[v], filler.y[v]);
         }
         tile.extras.water_mask = {255};
-        tile.extras.metadata = terrain_metadata(spec, id, 0, true);
+        tile.extras.metadata = terrain_metadata(terrain_spec(), id, 0, true);
         tile.mesh = quantize_mesh(filler, bounds);
         tile.glb_error = filler_error(id);
         // Float positions: a 16-bit step of a coarse filler tile's box is tens of metres.
         tile.exact_positions = true;
-        return tile;
+        return draft;
     }
 
-    TerrainTile data_terrain(const TileId& id,
-                             const TerrainSpec& spec,
-                             const LonLatBox& bounds,
-                             Format format) const {
+    TerrainDraft data_terrain(const TileId& id, const LonLatBox& bounds) const {
         // The 15-bit quantization moves vertices by up to half a step (about 1/65534 of the
         // tile) across the slope: it is measured at every sample, and where it takes the tile
         // past its bound the worst samples become vertices (quantize_within). The border lines
         // keep the vertices the zoom's eps gave them, so neighbouring tiles still share them.
-        // The 3D Tiles glb's surface is measured at every sample too: where its 16-bit positions
-        // would take it past the bound, it carries float32 positions instead.
         const double eps = eps_for_zoom(id.z);
         const double target = budget_at(id.z, eps).drawn_bound;
-        MeshedTile t = mesh_at(id, eps, false);
+        TerrainDraft draft;
+        MeshedTile& t = draft.meshed;
+        t = mesh_at(id, eps, false);
         if (t.mesh.triangle_count() == 0) {
             throw NotFound("tile " + tile_name(id) + ": no triangle from the DEM"); // filler
         }
         cover_rectangle(t.mesh, bounds);
-        TerrainTile tile;
+        TerrainTile& tile = draft.tile;
         std::size_t uncovered = 0;
         double error = 0;
         tile.mesh = quantize_within(
@@ -485,8 +549,25 @@ private:
             log::debug("tile " + tile_name(id) + ": " + std::to_string(uncovered) +
                        " sample(s) lie in no quantized triangle");
         }
+        draft.quantized = error;
         tile.error = std::max(error + t.budget.sag, target);
-        double drawn = error; // what the encoded format draws, measured at every sample
+        tile.extras.normals = vertex_normals(t, id);
+        return draft;
+    }
+
+    // The draft encoded as `format` (terrain or terrain3d), with what only that format carries.
+    // The 3D Tiles glb's surface is measured at every sample: where its 16-bit positions would
+    // take it past the bound, it carries float32 positions instead.
+    std::string encode_terrain(const TerrainDraft& draft, const TileId& id, Format format) const {
+        if (draft.tile.filler) {
+            return format == Format::Terrain
+                       ? encode_quantized_mesh(draft.tile.mesh, draft.tile.extras)
+                       : encode_terrain_glb(draft.tile);
+        }
+        const MeshedTile& t = draft.meshed;
+        const double target = budget_at(id.z, eps_for_zoom(id.z)).drawn_bound;
+        TerrainTile tile = draft.tile;
+        double drawn = draft.quantized; // what the encoded format draws, at every sample
         if (format == Format::Terrain3d) {
             drawn = surface_error(terrain_glb_surface(tile.mesh, false), t.raster, t.source_pixels);
             if (drawn + t.budget.sag > target) {
@@ -496,8 +577,8 @@ private:
             }
             tile.glb_error = std::max(drawn + t.budget.sag, target);
         } else {
-            tile.extras.water_mask = terrain_water_mask(t.raster, bounds);
-            tile.extras.metadata = terrain_metadata(spec, id, tile.error, false);
+            tile.extras.water_mask = terrain_water_mask(t.raster, tile_bounds(options_.scheme, id));
+            tile.extras.metadata = terrain_metadata(terrain_spec(), id, tile.error, false);
         }
         if (drawn + t.budget.sag > target + 1e-9) {
             log::warn(std::string("terrain tile ") + tile_name(id) + "." + extension(format) +
@@ -507,8 +588,8 @@ private:
             std::lock_guard lock(measured_mutex_);
             ++over_eps_;
         }
-        tile.extras.normals = vertex_normals(t, id);
-        return tile;
+        return format == Format::Terrain ? encode_quantized_mesh(tile.mesh, tile.extras)
+                                         : encode_terrain_glb(tile);
     }
 
     // The ellipsoid's unit normal at lon/lat (degrees), ECEF.

@@ -10,8 +10,10 @@
 
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 namespace tb::tiler {
@@ -101,6 +103,12 @@ public:
     // The encoded tile. Throws InputError for an id outside the scheme or an unknown eps level,
     // NotFound when the tile holds no data. Safe to call from many threads at once.
     virtual std::string make_tile(const TileId& id, Format format, EpsChoice eps = {}) const = 0;
+    // The tile in each of `formats` (mesh and terrain formats, at the zoom's eps), in that
+    // order: for each, the bytes make_tile(id, format) gives, with each mesh made once (glb and
+    // drc share one, terrain and terrain3d another). A format make_tile would answer NotFound
+    // for is left out. InputError for a DEM format or an id outside the scheme.
+    virtual std::vector<std::pair<Format, std::string>>
+    make_tiles(const TileId& id, std::span<const Format> formats) const = 0;
 
     // ---- the stages of make_tile, for the `tile` command, tests and benchmarks ----
 

@@ -275,3 +275,73 @@ TEST_CASE("a DEM too large to read whole gets bounding volumes over the Earth's 
     CHECK(tight->max_height() > 5000.0);
     CHECK(tight->max_height() < 5010.0);
 }
+
+TEST_CASE("make_tiles gives, format by format, exactly make_tile's bytes, on pixel and measured "
+          "layers, with voids, and for filler terrain") {
+    ScratchDir dir;
+    // 97 x 97 heights with a void block: in lon/lat (meshed on its own pixels) and in UTM
+    // (meshed on the zoom's lattice and measured).
+    struct Input {
+        const char* name;
+        int epsg;
+        std::array<double, 6> geotransform;
+    };
+    const Input inputs[] = {
+        {"lonlat.tif", 4326, {8.0, 0.25 / 96, 0, 47.25, 0, -0.25 / 96}},
+        {"utm.tif", 32632, {400000, 200, 0, 5235000, 0, -200}},
+    };
+    for (const Input& in : inputs) {
+        tb_test::Fixture f;
+        f.width = f.height = 97;
+        f.epsg = in.epsg;
+        f.geotransform = in.geotransform;
+        f.nodata = -9999;
+        for (int r = 0; r < 97; ++r) {
+            for (int c = 0; c < 97; ++c) {
+                const bool hole = r > 60 && r < 70 && c > 20 && c < 34;
+                f.values.push_back(
+                    hole ? -9999 : 600 + 4 * r + 80 * std::sin(c * 0.2) * std::cos(r * 0.15));
+            }
+        }
+        LayerOptions options;
+        options.sources = {tb_test::write_fixture(dir.file(in.name), f)};
+        options.tile_size = 32;
+        const auto layer = Layer::open(options);
+        INFO(in.name << ": " << to_string(layer->guarantee()));
+        const std::vector<Format> formats = {
+            Format::Glb, Format::Terrain, Format::Drc, Format::Terrain3d};
+        std::vector<TileId> ids;
+        for (int z : {layer->min_zoom(), layer->max_zoom()}) {
+            const TileRange r = layer->tiles_at(z);
+            for (std::int64_t y = r.y0; y <= r.y1; ++y) {
+                for (std::int64_t x = r.x0; x <= r.x1; ++x) {
+                    ids.push_back({z, x, y});
+                }
+            }
+        }
+        ids.push_back({layer->min_zoom(), 0, 0}); // no data: terrain filler only
+        std::size_t made = 0;
+        for (const TileId& id : ids) {
+            CAPTURE(id.z);
+            CAPTURE(id.x);
+            CAPTURE(id.y);
+            std::vector<std::pair<Format, std::string>> one_by_one;
+            for (Format format : formats) {
+                try {
+                    one_by_one.emplace_back(format, layer->make_tile(id, format));
+                } catch (const tb::NotFound&) {
+                }
+            }
+            const auto together = layer->make_tiles(id, formats);
+            REQUIRE(together.size() == one_by_one.size());
+            for (std::size_t k = 0; k < together.size(); ++k) {
+                CHECK(together[k].first == one_by_one[k].first);
+                CHECK(together[k].second == one_by_one[k].second);
+            }
+            made += together.size();
+        }
+        CHECK(made > 2 * ids.size()); // mostly tiles with data, in all four formats
+        CHECK_THROWS_AS(layer->make_tiles({1, 0, 0}, std::vector<Format>{Format::Terrarium}),
+                        tb::InputError);
+    }
+}

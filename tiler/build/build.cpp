@@ -838,16 +838,23 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
                 }
                 Made made{id, {}, dem};
                 try {
+                    std::vector<Format> formats;
                     for (Format f : o.formats) {
                         if (is_dem_format(f) == dem && makes(*layer, f, id)) {
+                            formats.push_back(f);
+                        }
+                    }
+                    if (dem) {
+                        for (Format f : formats) {
                             try {
-                                made.tiles.emplace_back(f,
-                                                        dem ? make_dem_tile(*layer, id, f)
-                                                            : layer->make_tile(id, f));
+                                made.tiles.emplace_back(f, make_dem_tile(*layer, id, f));
                             } catch (const NotFound&) {
                                 // no data for this format here; the others may have some
                             }
                         }
+                    } else {
+                        // Formats without data here are left out; the others share meshes.
+                        made.tiles = layer->make_tiles(id, formats);
                     }
                     if (made.tiles.empty()) {
                         ++counters.empty;
