@@ -46,8 +46,8 @@ int main(int argc, char** argv) {
         return words.empty() ? 1 : 0;
     }
     if (words[0] == "--version" || words[0] == "version") {
-        std::printf("terrabound %s\n",
-                    TB_REVISION); // the version, and the commit if built from git
+        // The version, and a hash of the sources that make tiles (what store manifests record).
+        std::printf("terrabound %s\n", TB_REVISION);
         return 0;
     }
     const tb::cli::Command* command = nullptr;

@@ -204,39 +204,61 @@ TEST_CASE("a built store is served only with the settings it was built with; its
     }
 }
 
-TEST_CASE("tiles with no manifest are refused and left where they are") {
+TEST_CASE("tiles with no manifest are an older server's cache in SQLite, removed, and refused "
+          "and left alone in a directory") {
     ScratchDir dir;
     const auto layer = Layer::open(small_options(write_hill(dir.file("hill.tif"))));
-    for (const auto& path : store_paths(dir)) {
-        INFO(path);
-        auto store = TileStore::open(path);
+    {
+        auto store = TileStore::open(dir.file("tiles"));
         store->put(kTile, "whose?");
         CHECK_THROWS_WITH_AS(prepare_store_for_serving(*store, *layer),
                              doctest::Contains("holds tiles but no serve-manifest.json or "
                                                "build-manifest.json"),
                              tb::InputError);
         CHECK(store->get(kTile) == std::optional<std::string>("whose?"));
+        CHECK_FALSE(store->get_document("hill", kServeManifest));
     }
+    auto store = TileStore::open(dir.file("tiles.sqlite"));
+    store->put(kTile, "an older server's");
+    prepare_store_for_serving(*store, *layer);
+    CHECK_FALSE(store->contains(kTile));
+    CHECK(store->get_document("hill", kServeManifest) ==
+          std::optional<std::string>(manifest_text(tile_settings(*layer))));
 }
 
-TEST_CASE("entries older manifests lack read as their defaults") {
-    const Manifest now = {
-        {"eps", "[2]"}, {"eps_levels", "[]"}, {"nodata", "null"}, {"dem_tile_size", "512"}};
-    CHECK_FALSE(first_change({{"eps", "[2]"}}, now));
+TEST_CASE("an entry a manifest lacks is a change: older builds did not record nodata or the DEM "
+          "tiles' settings") {
+    const Manifest now = {{"eps", "[2]"}, {"nodata", "null"}, {"dem_tile_size", "512"}};
     CHECK_FALSE(first_change(parse_manifest(manifest_text(now)), now));
-    // A DEM entry that is there is compared; a set nodata is not the default.
-    const auto dem = first_change({{"eps", "[2]"}, {"dem_tile_size", "256"}}, now);
+    const auto nodata = first_change({{"eps", "[2]"}}, now);
+    REQUIRE(nodata);
+    CHECK(nodata->key == "nodata");
+    CHECK(nodata->was == "(absent)");
+    const auto dem =
+        first_change({{"eps", "[2]"}, {"nodata", "null"}, {"dem_tile_size", "256"}}, now);
     REQUIRE(dem);
     CHECK(dem->key == "dem_tile_size");
-    const Manifest with_nodata = {{"eps", "[2]"}, {"nodata", "-32768"}};
-    const auto nodata = first_change({{"eps", "[2]"}}, with_nodata);
-    REQUIRE(nodata);
-    CHECK(nodata->was == "null");
-    CHECK(nodata->now == "-32768");
-    // Anything else absent is a change.
-    const auto eps = first_change({}, now);
-    REQUIRE(eps);
-    CHECK(eps->was == "(absent)");
+    CHECK(dem->was == "256");
     // Ignored keys are not compared.
     CHECK_FALSE(first_change({{"eps", "[1]"}}, {{"eps", "[2]"}}, {"eps"}));
+
+    // A built store whose manifest has no nodata entry is not served: its tiles may have been
+    // made with any nodata value.
+    ScratchDir dir;
+    const auto layer = Layer::open(small_options(write_hill(dir.file("hill.tif"))));
+    auto store = TileStore::open(dir.file("old.sqlite"));
+    Manifest older;
+    older.emplace_back("terrabound_build", "1");
+    for (const auto& entry : tile_settings(*layer)) {
+        if (entry.first != "nodata") {
+            older.push_back(entry);
+        }
+    }
+    store->put_document("hill", kBuildManifest, manifest_text(older));
+    store->put(kTile, "built with some nodata");
+    CHECK_THROWS_WITH_AS(prepare_store_for_serving(*store, *layer),
+                         doctest::Contains("(nodata is not recorded (made by an older "
+                                           "terrabound), now null)"),
+                         tb::InputError);
+    CHECK(store->contains(kTile));
 }

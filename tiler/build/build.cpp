@@ -84,8 +84,8 @@ void compare_manifests(const Manifest& was,
     if (const auto change = first_change(was, now, ignore)) {
         const std::string fix =
             change->key == "version"
-                ? "a build cannot be continued by another terrabound version; "
-                  "use --force to start over"
+                ? "a build cannot be continued by another terrabound revision (its version, or "
+                  "the code that makes tiles, changed); use --force to start over"
                 : "rerun with the same parameters, or use --force to start over";
         throw InputError(where + ": the existing build was made with different parameters: " +
                          change->key + " was " + change->was + ", now " + change->now + "; " + fix);

@@ -35,21 +35,6 @@ std::string source_entry(const std::string& source) {
     return "{\"path\": " + json_string(path) + extra + "}";
 }
 
-bool is_dem_entry(const std::string& key) {
-    return key.rfind("dem_", 0) == 0;
-}
-
-// What an entry that older manifests lack stood for.
-std::optional<std::string> default_value(const std::string& key) {
-    if (key == "eps_levels") {
-        return "[]";
-    }
-    if (key == "nodata") {
-        return "null";
-    }
-    return std::nullopt;
-}
-
 } // namespace
 
 Manifest tile_settings(const Layer& layer) {
@@ -130,20 +115,25 @@ first_change(const Manifest& was, const Manifest& now, const std::vector<std::st
         if (std::find(ignore.begin(), ignore.end(), key) != ignore.end()) {
             continue;
         }
-        const auto found = std::find_if(
-            was.begin(), was.end(), [&key = key](const auto& entry) { return entry.first == key; });
-        if (found == was.end() && is_dem_entry(key)) {
-            continue;
-        }
-        const std::string old = found != was.end()   ? found->second
-                                : default_value(key) ? *default_value(key)
-                                                     : std::string("(absent)");
+        const std::string old = manifest_value(was, key);
         if (old != value) {
             return ManifestChange{key, old, value};
         }
     }
     return std::nullopt;
 }
+
+namespace {
+
+// "eps was [2, 1], now [80, 40]", or for an entry the manifest lacks, what that means.
+std::string describe(const ManifestChange& c) {
+    if (c.was == "(absent)") {
+        return c.key + " is not recorded (made by an older terrabound), now " + c.now;
+    }
+    return c.key + " was " + c.was + ", now " + c.now;
+}
+
+} // namespace
 
 StoreUse prepare_store_for_serving(TileStore& store, const Layer& layer) {
     const std::string& name = layer.options().name;
@@ -157,13 +147,12 @@ StoreUse prepare_store_for_serving(TileStore& store, const Layer& layer) {
         if (change) {
             throw InputError(where +
                              ": its tiles were made by terrabound build with other settings (" +
-                             change->key + " was " + change->was + ", now " + change->now +
-                             "), so they do not bear this layer's error bounds; serve it with the "
-                             "settings it was built with, rebuild it with build --force, or "
-                             "give serve another store");
+                             describe(*change) +
+                             "); serve it with the settings it was built with, rebuild it with "
+                             "build --force, or give serve another store");
         }
-        // Another Terrabound made the tiles to the same settings and bounds: they are served,
-        // and the warning says how to have this one's.
+        // Another Terrabound revision made the tiles to the same settings and bounds: they are
+        // served, and the warning says how to have this one's.
         if (const auto version = first_change(built, {now.front()})) {
             const auto bare = [](const std::string& v) { // the JSON string's text
                 return v.size() >= 2 && v.front() == '"' ? v.substr(1, v.size() - 2) : v;
@@ -171,7 +160,7 @@ StoreUse prepare_store_for_serving(TileStore& store, const Layer& layer) {
             log::warn("store: " + where + " was built by terrabound " + bare(version->was) +
                       ", this is " + bare(version->now) +
                       "; serving its tiles as built (same settings); rebuild with build --force "
-                      "for this version's tiles");
+                      "for this revision's tiles");
         }
         StoreUse use;
         use.eps_levels =
@@ -188,14 +177,23 @@ StoreUse prepare_store_for_serving(TileStore& store, const Layer& layer) {
         if (!change) {
             return {};
         }
-        log::warn("store: " + where + " holds tiles made with other settings (" + change->key +
-                  " was " + change->was + ", now " + change->now + "); removing them");
+        log::warn("store: " + where + " holds tiles made with other settings (" +
+                  describe(*change) + "); removing them");
         store.remove_layer(name);
     } else if (store.has_layer(name)) {
-        throw InputError(where + " holds tiles but no " + std::string(kServeManifest) + " or " +
-                         kBuildManifest +
-                         " saying what made them (an older terrabound's cache?); move that store "
-                         "aside or delete it, or give serve another store");
+        // `build` writes its manifest before any tile, so tiles of ours with no manifest at all
+        // are an older server's cache; in a directory they may also be someone else's files.
+        if (!store.written_by_terrabound_only()) {
+            throw InputError(where + " holds tiles but no " + std::string(kServeManifest) + " or " +
+                             kBuildManifest +
+                             " saying what made them (an older terrabound's cache, or other "
+                             "files); move the layer's directory aside or delete it, or give "
+                             "serve another store");
+        }
+        log::warn("store: " + where +
+                  " holds tiles an older terrabound kept without recording its settings; "
+                  "removing them");
+        store.remove_layer(name);
     }
     store.put_document(name, kServeManifest, manifest_text(now));
     return {};

@@ -4,7 +4,7 @@
 // "key": JSON value per line in a fixed order, with no timestamps, so that processes starting
 // together write identical bytes.
 //   build-manifest.json  written by `terrabound build` before its first tile (build.hpp);
-//   serve-manifest.json  written by `terrabound serve` when it first keeps a tile in a store.
+//   serve-manifest.json  written by `terrabound serve` when it starts with a store.
 // Before a store's tiles are handed out or added to, the manifest is compared with the layer's
 // settings now: a tile made for another eps, DEM or Terrabound version would publish a bound
 // that is not this layer's.
@@ -25,10 +25,10 @@ inline constexpr const char* kServeManifest = "serve-manifest.json";
 using Manifest = std::vector<std::pair<std::string, std::string>>; // key, JSON value
 
 // The entries that decide the bytes of every tile the layer makes, in this order: version (the
-// revision: "0.1.0", plus "+g<commit>" when built from a git checkout),
-// layer, sources (absolute path, size and mtime of each local file), scheme, tile_size, datum,
-// min_zoom, max_zoom, eps (the ladder, one per zoom), eps_levels, nodata, and the DEM pyramid's
-// dem_tile_size, dem_heights, dem_min_zoom, dem_max_zoom.
+// revision: "0.1.0+" and a hash of core/ and tiler/'s sources, see CMakeLists.txt), layer, sources
+// (absolute path, size and mtime of each local file), scheme, tile_size, datum, min_zoom, max_zoom,
+// eps (the ladder, one per zoom), eps_levels, nodata, and the DEM pyramid's dem_tile_size,
+// dem_heights, dem_min_zoom, dem_max_zoom.
 Manifest tile_settings(const Layer& layer);
 
 std::string manifest_text(const Manifest& m);
@@ -41,8 +41,7 @@ struct ManifestChange {
     std::string key, was, now;
 };
 // The first entry of `now` (in its order) whose value in `was` differs, skipping `ignore`d keys.
-// Entries older manifests lack compare as their defaults: eps_levels [], nodata null; the
-// dem_* entries, which older builds wrote only with DEM formats, are skipped when absent.
+// An entry `was` lacks (older manifests record fewer) differs: what it was is unknown.
 std::optional<ManifestChange>
 first_change(const Manifest& was, const Manifest& now, const std::vector<std::string>& ignore = {});
 
@@ -60,7 +59,8 @@ struct StoreUse {
 //     when only the Terrabound version differs, the tiles are served with a warning line;
 //   - a serve manifest that does not match means the tiles are an earlier server's cache made
 //     with other settings: they are removed (one warning line), and the new manifest written;
-//   - tiles with no manifest at all: InputError (they may not be Terrabound's, so they are not
+//   - tiles with no manifest at all: in an SQLite store an older server's cache, removed (one
+//     warning line); in a directory InputError (they may not be Terrabound's, so they are not
 //     deleted on a guess);
 //   - an empty layer gets a serve manifest.
 // IoError when the store cannot be read or written.

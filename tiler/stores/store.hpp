@@ -65,6 +65,9 @@ public:
     virtual void clean_up(const std::string& layer) = 0;
 
     virtual std::string describe() const = 0; // "directory OUT" / "sqlite OUT.sqlite"
+    // True when only Terrabound writes what the store holds (an SQLite store's tables), false
+    // when other programs may have put files there too (a directory).
+    virtual bool written_by_terrabound_only() const = 0;
 };
 
 // Layer names are URL-safe: [A-Za-z0-9_-]+, at most 64 characters. InputError otherwise.

@@ -317,6 +317,7 @@ public:
     }
 
     std::string describe() const override { return "directory " + root_; }
+    bool written_by_terrabound_only() const override { return false; }
 
 private:
     StorePath tile_path(const TileKey& key) const {

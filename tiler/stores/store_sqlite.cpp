@@ -218,6 +218,7 @@ public:
     }
 
     std::string describe() const override { return "sqlite " + path_; }
+    bool written_by_terrabound_only() const override { return true; }
 
 private:
     [[noreturn]] void fail(int rc, const std::string& action) const {
