@@ -205,7 +205,8 @@ public:
                                  "': globe terrain tiles have only their zoom's eps "
                                  "(CesiumJS picks levels itself); drop ?eps");
             }
-            return encode_terrain(terrain_draft(id), id, format);
+            TerrainDraft draft = terrain_draft(id);
+            return encode_terrain(draft, id, format);
         }
         double value = 0;
         if (eps.level < 0) {
@@ -250,7 +251,11 @@ public:
                         normals = vertex_normals(*meshed, id);
                     }
                 }
-                made[k] = encode_meshed(*meshed, normals, id, formats[k], eps_for_zoom(id.z));
+                try {
+                    made[k] = encode_meshed(*meshed, normals, id, formats[k], eps_for_zoom(id.z));
+                } catch (const NotFound&) {
+                    // nothing this format can carry (a .drc of voids only)
+                }
             }
         }
         std::optional<TerrainDraft> draft;
@@ -265,7 +270,11 @@ public:
                     break; // beyond the layer's max zoom: no terrain tile
                 }
             }
-            made[k] = encode_terrain(*draft, id, formats[k]);
+            try {
+                made[k] = encode_terrain(*draft, id, formats[k]);
+            } catch (const NotFound&) {
+                // nothing this format can carry
+            }
         }
         std::vector<std::pair<Format, std::string>> out;
         for (std::size_t k = 0; k < formats.size(); ++k) {
@@ -555,10 +564,12 @@ private:
         return draft;
     }
 
-    // The draft encoded as `format` (terrain or terrain3d), with what only that format carries.
+    // The draft encoded as `format` (terrain or terrain3d), with what only that format carries,
+    // set on the draft itself: the water mask and metadata only quantized-mesh encodes, the
+    // positions and bound only the glb does, so one draft serves both formats in either order.
     // The 3D Tiles glb's surface is measured at every sample: where its 16-bit positions would
     // take it past the bound, it carries float32 positions instead.
-    std::string encode_terrain(const TerrainDraft& draft, const TileId& id, Format format) const {
+    std::string encode_terrain(TerrainDraft& draft, const TileId& id, Format format) const {
         if (draft.tile.filler) {
             return format == Format::Terrain
                        ? encode_quantized_mesh(draft.tile.mesh, draft.tile.extras)
@@ -566,7 +577,7 @@ private:
         }
         const MeshedTile& t = draft.meshed;
         const double target = budget_at(id.z, eps_for_zoom(id.z)).drawn_bound;
-        TerrainTile tile = draft.tile;
+        TerrainTile& tile = draft.tile;
         double drawn = draft.quantized; // what the encoded format draws, at every sample
         if (format == Format::Terrain3d) {
             drawn = surface_error(terrain_glb_surface(tile.mesh, false), t.raster, t.source_pixels);

@@ -281,14 +281,17 @@ TEST_CASE("make_tiles gives, format by format, exactly make_tile's bytes, on pix
     ScratchDir dir;
     // 97 x 97 heights with a void block: in lon/lat (meshed on its own pixels) and in UTM
     // (meshed on the zoom's lattice and measured).
+    // The third has only voids in its western third, so some tiles hold voids alone (no .drc).
     struct Input {
         const char* name;
         int epsg;
         std::array<double, 6> geotransform;
+        int void_columns;
     };
     const Input inputs[] = {
-        {"lonlat.tif", 4326, {8.0, 0.25 / 96, 0, 47.25, 0, -0.25 / 96}},
-        {"utm.tif", 32632, {400000, 200, 0, 5235000, 0, -200}},
+        {"lonlat.tif", 4326, {8.0, 0.25 / 96, 0, 47.25, 0, -0.25 / 96}, 0},
+        {"utm.tif", 32632, {400000, 200, 0, 5235000, 0, -200}, 0},
+        {"west.tif", 4326, {8.0, 0.25 / 96, 0, 47.25, 0, -0.25 / 96}, 40},
     };
     for (const Input& in : inputs) {
         tb_test::Fixture f;
@@ -298,7 +301,7 @@ TEST_CASE("make_tiles gives, format by format, exactly make_tile's bytes, on pix
         f.nodata = -9999;
         for (int r = 0; r < 97; ++r) {
             for (int c = 0; c < 97; ++c) {
-                const bool hole = r > 60 && r < 70 && c > 20 && c < 34;
+                const bool hole = (r > 60 && r < 70 && c > 20 && c < 34) || c < in.void_columns;
                 f.values.push_back(
                     hole ? -9999 : 600 + 4 * r + 80 * std::sin(c * 0.2) * std::cos(r * 0.15));
             }
@@ -320,7 +323,7 @@ TEST_CASE("make_tiles gives, format by format, exactly make_tile's bytes, on pix
             }
         }
         ids.push_back({layer->min_zoom(), 0, 0}); // no data: terrain filler only
-        std::size_t made = 0;
+        std::size_t made = 0, no_drc = 0;
         for (const TileId& id : ids) {
             CAPTURE(id.z);
             CAPTURE(id.x);
@@ -338,9 +341,23 @@ TEST_CASE("make_tiles gives, format by format, exactly make_tile's bytes, on pix
                 CHECK(together[k].first == one_by_one[k].first);
                 CHECK(together[k].second == one_by_one[k].second);
             }
+            // In the reverse order too: a format's bytes do not depend on what came before.
+            const std::vector<Format> reversed(formats.rbegin(), formats.rend());
+            const auto backwards = layer->make_tiles(id, reversed);
+            REQUIRE(backwards.size() == together.size());
+            for (std::size_t k = 0; k < backwards.size(); ++k) {
+                CHECK(backwards[k] == together[together.size() - 1 - k]);
+            }
             made += together.size();
+            no_drc += layer->may_have_tile(id) &&
+                      std::none_of(together.begin(), together.end(), [](const auto& t) {
+                          return t.first == Format::Drc;
+                      });
         }
         CHECK(made > 2 * ids.size()); // mostly tiles with data, in all four formats
+        if (in.void_columns > 0) {
+            CHECK(no_drc > 0);
+        }
         CHECK_THROWS_AS(layer->make_tiles({1, 0, 0}, std::vector<Format>{Format::Terrarium}),
                         tb::InputError);
     }
