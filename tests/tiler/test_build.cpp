@@ -433,6 +433,11 @@ TEST_CASE("--resume with different parameters names the one that differs, and --
         run(args(dem, dir / "out", {"--max-zoom", "8", "--resume", "--formats", "drc"}), dir);
     CHECK(fmt.code == 2);
     CHECK(fmt.err.find("formats was [\"glb\"]") != std::string::npos);
+    // nodata decides which samples are voids, so the tiles: recorded since the store manifests.
+    const Run nodata =
+        run(args(dem, dir / "out", {"--max-zoom", "8", "--resume", "--nodata", "800"}), dir);
+    CHECK(nodata.code == 2);
+    CHECK(nodata.err.find("nodata was null, now 800") != std::string::npos);
     // A finished build resumed again skips everything and changes nothing.
     const auto before = tree(dir.path / "out");
     const Run again = run(args(dem, dir / "out", {"--max-zoom", "8", "--resume", "--json"}), dir);
