@@ -242,7 +242,7 @@ public:
                 }
                 if (!meshed) {
                     try {
-                        check_id(id);
+                        check_id(id); // before eps_for_zoom: its message names the id
                         meshed = mesh_tile_at(id, eps_for_zoom(id.z));
                     } catch (const NotFound&) {
                         break; // no data here: no glb, no drc

@@ -44,6 +44,13 @@ LayerOptions small_options(const std::string& dem) {
 
 const TileKey kTile{"hill", {9, 532, 387}, Format::Glb, -1}; // holds 7.1 E, 46.1 N
 
+// A manifest's text as another Terrabound revision would have written it.
+std::string from_another_revision(std::string manifest) {
+    const auto at = manifest.find("\"version\": \"");
+    REQUIRE(at != std::string::npos);
+    return manifest.insert(at + 12, "0.0.9-");
+}
+
 // The stores both kinds of path open: a directory and an SQLite file.
 std::vector<std::string> store_paths(const ScratchDir& dir) {
     return {dir.file("tiles"), dir.file("tiles.sqlite")};
@@ -127,9 +134,9 @@ TEST_CASE("a server's cached tiles made with another eps, eps level, nodata or D
         const auto layer = Layer::open(base);
         prepare_store_for_serving(*store, *layer);
         store->put(kTile, "made by another version");
-        std::string older = *store->get_document("hill", kServeManifest);
-        older.insert(older.find("\"version\": \"") + 12, "0.0.9-");
-        store->put_document("hill", kServeManifest, older);
+        store->put_document("hill",
+                            kServeManifest,
+                            from_another_revision(*store->get_document("hill", kServeManifest)));
         prepare_store_for_serving(*store, *layer);
         CHECK_FALSE(store->contains(kTile));
     }
@@ -194,11 +201,7 @@ TEST_CASE("a built store is served only with the settings it was built with; its
         CHECK_FALSE(prepare_store_for_serving(*store, *Layer::open(levels)).eps_levels);
 
         // Built by another Terrabound to the same settings: served, tiles kept.
-        std::string older = *built;
-        const auto at = older.find("\"version\": \"");
-        REQUIRE(at != std::string::npos);
-        older.insert(at + 12, "0.0.9-");
-        store->put_document("hill", kBuildManifest, older);
+        store->put_document("hill", kBuildManifest, from_another_revision(*built));
         CHECK(prepare_store_for_serving(*store, *Layer::open(b.layer)).eps_levels);
         CHECK(store->contains(tile));
     }

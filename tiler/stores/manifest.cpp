@@ -133,6 +133,11 @@ std::string describe(const ManifestChange& c) {
     return c.key + " was " + c.was + ", now " + c.now;
 }
 
+// The one entry `key` of `m`.
+Manifest only(const Manifest& m, const std::string& key) {
+    return {{key, manifest_value(m, key)}};
+}
+
 } // namespace
 
 StoreUse prepare_store_for_serving(TileStore& store, const Layer& layer) {
@@ -153,7 +158,7 @@ StoreUse prepare_store_for_serving(TileStore& store, const Layer& layer) {
         }
         // Another Terrabound revision made the tiles to the same settings and bounds: they are
         // served, and the warning says how to have this one's.
-        if (const auto version = first_change(built, {now.front()})) {
+        if (const auto version = first_change(built, only(now, "version"))) {
             const auto bare = [](const std::string& v) { // the JSON string's text
                 return v.size() >= 2 && v.front() == '"' ? v.substr(1, v.size() - 2) : v;
             };
@@ -163,8 +168,7 @@ StoreUse prepare_store_for_serving(TileStore& store, const Layer& layer) {
                       "for this revision's tiles");
         }
         StoreUse use;
-        use.eps_levels =
-            !first_change(built, {{"eps_levels", manifest_value(now, "eps_levels")}}).has_value();
+        use.eps_levels = !first_change(built, only(now, "eps_levels")).has_value();
         if (!use.eps_levels) {
             log::info("store: " + where +
                       " was built without this layer's eps_levels; tiles at those levels are "
