@@ -267,53 +267,88 @@ QuantizedMesh quantize_mesh(const TileMesh& mesh, const LonLatBox& bounds) {
 
 namespace {
 
-// The valid samples of raster.grid and the check points, in the tile's u/v units.
-std::vector<Probe>
-probes_of(const LonLatBox& b, const TileRaster& raster, const std::vector<CheckPoint>& points) {
-    const auto to_probe = [&](const LonLat& p, double h) {
-        return Probe{(p.lon - b.west) / (b.east - b.west) * kQuantizedMax,
-                     (p.lat - b.south) / (b.north - b.south) * kQuantizedMax,
+// The valid samples of raster.grid and the check points, in the tile's u/v units, made one at
+// a time instead of kept in a list: a coarse globe-terrain tile holds millions of samples, and
+// the list (40 bytes a probe) took about 200 MB on each build thread at once.
+class Probes {
+public:
+    Probes(const LonLatBox& b, const TileRaster& raster, const std::vector<CheckPoint>& points)
+        : b_(b), raster_(raster), points_(points) {
+        const core::HeightGrid& g = raster.grid;
+        lon_.resize(static_cast<std::size_t>(g.width));
+        lat_.resize(static_cast<std::size_t>(g.height));
+        for (int i = 0; i < g.width; ++i) {
+            lon_[static_cast<std::size_t>(i)] = grid_to_lonlat(raster, i, 0).lon;
+        }
+        for (int j = 0; j < g.height; ++j) {
+            lat_[static_cast<std::size_t>(j)] = grid_to_lonlat(raster, 0, j).lat;
+        }
+    }
+
+    // Calls f(handle, probe) for every probe, samples in raster order, then the check points;
+    // at(handle) makes that probe again.
+    template <typename F> void for_each(F&& f) const {
+        const core::HeightGrid& g = raster_.grid;
+        const auto w = static_cast<std::size_t>(g.width);
+        for (int j = 0; j < g.height; ++j) {
+            for (int i = 0; i < g.width; ++i) {
+                if (g.is_valid(i, j)) {
+                    const std::size_t handle =
+                        static_cast<std::size_t>(j) * w + static_cast<std::size_t>(i);
+                    f(handle, sample(i, j));
+                }
+            }
+        }
+        const std::size_t first = w * static_cast<std::size_t>(g.height);
+        for (std::size_t c = 0; c < points_.size(); ++c) {
+            f(first + c, check_point(c));
+        }
+    }
+
+    Probe at(std::size_t handle) const {
+        const auto w = static_cast<std::size_t>(raster_.grid.width);
+        const std::size_t first = w * static_cast<std::size_t>(raster_.grid.height);
+        if (handle >= first) {
+            return check_point(handle - first);
+        }
+        return sample(static_cast<int>(handle % w), static_cast<int>(handle / w));
+    }
+
+private:
+    Probe make(const LonLat& p, double h) const {
+        return Probe{(p.lon - b_.west) / (b_.east - b_.west) * kQuantizedMax,
+                     (p.lat - b_.south) / (b_.north - b_.south) * kQuantizedMax,
                      h,
                      p.lon,
                      p.lat};
-    };
-    std::vector<Probe> out;
-    const core::HeightGrid& g = raster.grid;
-    std::vector<double> lon(static_cast<std::size_t>(g.width)),
-        lat(static_cast<std::size_t>(g.height));
-    for (int i = 0; i < g.width; ++i) {
-        lon[static_cast<std::size_t>(i)] = grid_to_lonlat(raster, i, 0).lon;
     }
-    for (int j = 0; j < g.height; ++j) {
-        lat[static_cast<std::size_t>(j)] = grid_to_lonlat(raster, 0, j).lat;
+    Probe sample(int i, int j) const {
+        return make({lon_[static_cast<std::size_t>(i)], lat_[static_cast<std::size_t>(j)]},
+                    raster_.grid.at(i, j));
     }
-    for (int j = 0; j < g.height; ++j) {
-        for (int i = 0; i < g.width; ++i) {
-            if (g.is_valid(i, j)) {
-                out.push_back(
-                    to_probe({lon[static_cast<std::size_t>(i)], lat[static_cast<std::size_t>(j)]},
-                             g.at(i, j)));
-            }
-        }
+    Probe check_point(std::size_t c) const {
+        const CheckPoint& p = points_[c];
+        return make(grid_to_lonlat(raster_, p.column, p.row), p.height);
     }
-    for (const CheckPoint& c : points) {
-        out.push_back(to_probe(grid_to_lonlat(raster, c.column, c.row), c.height));
-    }
-    return out;
-}
 
-double worst_error(const SurfaceMesh& q, const std::vector<Probe>& probes, std::size_t* missed) {
+    const LonLatBox& b_;
+    const TileRaster& raster_;
+    const std::vector<CheckPoint>& points_;
+    std::vector<double> lon_, lat_;
+};
+
+double worst_error(const SurfaceMesh& q, const Probes& probes, std::size_t* missed) {
     const TriangleBuckets buckets(q);
     double worst = 0;
     std::size_t outside = 0;
-    for (const Probe& p : probes) {
+    probes.for_each([&](std::size_t, const Probe& p) {
         double e = 0;
         if (buckets.error_at(p, e)) {
             worst = std::max(worst, e);
         } else {
             ++outside;
         }
-    }
+    });
     if (missed) {
         *missed = outside;
     }
@@ -326,14 +361,14 @@ double quantized_error(const QuantizedMesh& q,
                        const TileRaster& raster,
                        const std::vector<CheckPoint>& points,
                        std::size_t* uncovered) {
-    return worst_error(to_surface(q), probes_of(q.bounds, raster, points), uncovered);
+    return worst_error(to_surface(q), Probes(q.bounds, raster, points), uncovered);
 }
 
 double surface_error(const SurfaceMesh& mesh,
                      const TileRaster& raster,
                      const std::vector<CheckPoint>& points,
                      std::size_t* uncovered) {
-    return worst_error(mesh, probes_of(mesh.bounds, raster, points), uncovered);
+    return worst_error(mesh, Probes(mesh.bounds, raster, points), uncovered);
 }
 
 QuantizedMesh quantize_within(TileMesh& mesh,
@@ -343,7 +378,7 @@ QuantizedMesh quantize_within(TileMesh& mesh,
                               double allowed,
                               double& error,
                               std::size_t* uncovered) {
-    const std::vector<Probe> probes = probes_of(bounds, raster, points);
+    const Probes probes(bounds, raster, points);
     constexpr int kRounds = 8;
     constexpr double kClear = 1e-3; // a weight below this puts the sample on an edge
     constexpr std::uint32_t kNoTriangle = ~std::uint32_t{0};
@@ -360,14 +395,13 @@ QuantizedMesh quantize_within(TileMesh& mesh,
         std::vector<Worst> worst(mesh.triangle_count());
         error = 0;
         std::size_t outside = 0;
-        for (std::size_t k = 0; k < probes.size(); ++k) {
-            const Probe& p = probes[k];
+        probes.for_each([&](std::size_t k, const Probe& p) {
             double e = 0;
             std::uint32_t t = 0;
             std::array<double, 3> w{};
             if (!buckets.error_at(p, e, &t, &w)) {
                 ++outside;
-                continue;
+                return;
             }
             error = std::max(error, e);
             const int on_edges = (w[0] < kClear) + (w[1] < kClear) + (w[2] < kClear);
@@ -376,7 +410,7 @@ QuantizedMesh quantize_within(TileMesh& mesh,
             if (e > allowed && e > worst[t].error && movable) {
                 worst[t] = {e, k, w};
             }
-        }
+        });
         if (uncovered) {
             *uncovered = outside;
         }
@@ -427,7 +461,7 @@ QuantizedMesh quantize_within(TileMesh& mesh,
             if (touched[t]) {
                 continue;
             }
-            const Probe& p = probes[worst[t].probe];
+            const Probe p = probes.at(worst[t].probe);
             const auto& w = worst[t].w;
             const core::Index tri[3] = {
                 mesh.triangles[3 * t], mesh.triangles[3 * t + 1], mesh.triangles[3 * t + 2]};
