@@ -93,16 +93,26 @@ public:
                          1024)) {
         const std::size_t cells = static_cast<std::size_t>(cells_per_side_) * cells_per_side_;
         const std::size_t triangles = q_.triangles.size() / 3;
-        // Each triangle's box of cells, found once for both passes.
+        // Each triangle's corners, heights and area, read once here instead of through the
+        // index for every probe, and its box of cells, found once for both passes. A triangle
+        // of zero area holds no probe and is left out.
+        corners_.resize(triangles);
         std::vector<std::array<int, 4>> box(triangles); // first column, last, first row, last
         for (std::size_t t = 0; t < triangles; ++t) {
-            double u0 = 1e9, u1 = -1e9, v0 = 1e9, v1 = -1e9;
-            for (int k = 0; k < 3; ++k) {
-                const std::uint32_t i = q_.triangles[3 * t + static_cast<std::size_t>(k)];
-                u0 = std::min(u0, q_.u[i]), u1 = std::max(u1, q_.u[i]);
-                v0 = std::min(v0, q_.v[i]), v1 = std::max(v1, q_.v[i]);
+            const std::uint32_t a = q_.triangles[3 * t], b = q_.triangles[3 * t + 1],
+                                c = q_.triangles[3 * t + 2];
+            Corners& k = corners_[t];
+            k = {
+                q_.u[a], q_.v[a], q_.u[b], q_.v[b], q_.u[c], q_.v[c], 0, q_.h[a], q_.h[b], q_.h[c]};
+            k.area = (k.ub - k.ua) * (k.vc - k.va) - (k.uc - k.ua) * (k.vb - k.va);
+            if (k.area == 0) {
+                box[t] = {0, -1, 0, -1};
+                continue;
             }
-            box[t] = {cell(u0), cell(u1), cell(v0), cell(v1)};
+            box[t] = {cell(std::min({k.ua, k.ub, k.uc})),
+                      cell(std::max({k.ua, k.ub, k.uc})),
+                      cell(std::min({k.va, k.vb, k.vc})),
+                      cell(std::max({k.va, k.vb, k.vc}))};
         }
         first_.assign(cells + 1, 0);
         const auto each_cell = [&](std::size_t t, auto&& f) {
@@ -139,22 +149,24 @@ public:
                                static_cast<std::size_t>(cell(p.u));
         for (std::uint32_t k = first_[at]; k < first_[at + 1]; ++k) {
             const std::uint32_t t = members_[k];
-            const std::uint32_t a = q_.triangles[3 * t], b = q_.triangles[3 * t + 1],
-                                c = q_.triangles[3 * t + 2];
-            const double ua = q_.u[a], va = q_.v[a], ub = q_.u[b], vb = q_.v[b], uc = q_.u[c],
-                         vc = q_.v[c];
-            const double area = (ub - ua) * (vc - va) - (uc - ua) * (vb - va);
-            if (area == 0) {
+            const Corners& c = corners_[t];
+            const double na = (c.ub - p.u) * (c.vc - p.v) - (c.uc - p.u) * (c.vb - p.v);
+            const double nb = (c.uc - p.u) * (c.va - p.v) - (c.ua - p.u) * (c.vc - p.v);
+            constexpr double kTol = -1e-9;
+            // Most triangles of a cell do not hold p: a weight clearly below kTol (twice as far
+            // below 0, so that the division could not bring it back) rules one out before the
+            // divisions; any other goes through the exact test below.
+            const double margin = 2 * kTol * std::abs(c.area);
+            if ((c.area > 0 ? na : -na) < margin || (c.area > 0 ? nb : -nb) < margin) {
                 continue;
             }
-            const double wa = ((ub - p.u) * (vc - p.v) - (uc - p.u) * (vb - p.v)) / area;
-            const double wb = ((uc - p.u) * (va - p.v) - (ua - p.u) * (vc - p.v)) / area;
+            const double wa = na / c.area;
+            const double wb = nb / c.area;
             const double wc = 1 - wa - wb;
-            constexpr double kTol = -1e-9;
             if (wa < kTol || wb < kTol || wc < kTol) {
                 continue;
             }
-            const double h = wa * q_.h[a] + wb * q_.h[b] + wc * q_.h[c];
+            const double h = wa * c.ha + wb * c.hb + wc * c.hc;
             const double e = std::abs(h - p.h);
             if (!found || e > error) {
                 error = e;
@@ -177,6 +189,10 @@ private:
     }
     SurfaceMesh q_;
     int cells_per_side_;
+    struct Corners {
+        double ua, va, ub, vb, uc, vc, area, ha, hb, hc;
+    };
+    std::vector<Corners> corners_;     // per triangle
     std::vector<std::uint32_t> first_; // cell c's triangles are members_[first_[c], first_[c + 1])
     std::vector<std::uint32_t> members_;
 };
