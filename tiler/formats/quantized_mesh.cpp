@@ -102,17 +102,20 @@ public:
             const std::uint32_t a = q_.triangles[3 * t], b = q_.triangles[3 * t + 1],
                                 c = q_.triangles[3 * t + 2];
             Corners& k = corners_[t];
-            k = {
-                q_.u[a], q_.v[a], q_.u[b], q_.v[b], q_.u[c], q_.v[c], 0, q_.h[a], q_.h[b], q_.h[c]};
+            k.ua = q_.u[a], k.va = q_.v[a], k.ub = q_.u[b], k.vb = q_.v[b], k.uc = q_.u[c],
+            k.vc = q_.v[c], k.ha = q_.h[a], k.hb = q_.h[b], k.hc = q_.h[c];
             k.area = (k.ub - k.ua) * (k.vc - k.va) - (k.uc - k.ua) * (k.vb - k.va);
             if (k.area == 0) {
                 box[t] = {0, -1, 0, -1};
                 continue;
             }
-            box[t] = {cell(std::min({k.ua, k.ub, k.uc})),
-                      cell(std::max({k.ua, k.ub, k.uc})),
-                      cell(std::min({k.va, k.vb, k.vc})),
-                      cell(std::max({k.va, k.vb, k.vc}))};
+            k.u0 = std::min({k.ua, k.ub, k.uc}), k.u1 = std::max({k.ua, k.ub, k.uc});
+            k.v0 = std::min({k.va, k.vb, k.vc}), k.v1 = std::max({k.va, k.vb, k.vc});
+            box[t] = {cell(k.u0), cell(k.u1), cell(k.v0), cell(k.v1)};
+            // A probe the exact test below accepts has weights of at least kTol, so it lies
+            // within |kTol| times the triangle's height (at most the tile's diagonal, 46,341
+            // units) of it: well inside the box widened by kSlack.
+            k.u0 -= kSlack, k.u1 += kSlack, k.v0 -= kSlack, k.v1 += kSlack;
         }
         first_.assign(cells + 1, 0);
         const auto each_cell = [&](std::size_t t, auto&& f) {
@@ -150,9 +153,11 @@ public:
         for (std::uint32_t k = first_[at]; k < first_[at + 1]; ++k) {
             const std::uint32_t t = members_[k];
             const Corners& c = corners_[t];
+            if (p.u < c.u0 || p.u > c.u1 || p.v < c.v0 || p.v > c.v1) {
+                continue;
+            }
             const double na = (c.ub - p.u) * (c.vc - p.v) - (c.uc - p.u) * (c.vb - p.v);
             const double nb = (c.uc - p.u) * (c.va - p.v) - (c.ua - p.u) * (c.vc - p.v);
-            constexpr double kTol = -1e-9;
             // Most triangles of a cell do not hold p: a weight clearly below kTol (twice as far
             // below 0, so that the division could not bring it back) rules one out before the
             // divisions; any other goes through the exact test below.
@@ -189,8 +194,11 @@ private:
     }
     SurfaceMesh q_;
     int cells_per_side_;
+    static constexpr double kTol = -1e-9; // the least barycentric weight of a point held
+    static constexpr double kSlack = 1e-3;
     struct Corners {
         double ua, va, ub, vb, uc, vc, area, ha, hb, hc;
+        double u0, u1, v0, v1; // the bounding box, widened by kSlack
     };
     std::vector<Corners> corners_;     // per triangle
     std::vector<std::uint32_t> first_; // cell c's triangles are members_[first_[c], first_[c + 1])
