@@ -135,15 +135,21 @@ TEST_CASE("one strip, an unlocked border or a narrow grid mesh the grid whole") 
                tb::core::triangulate(narrow, locked)));
 }
 
-TEST_CASE("two strips of a 257 x 257 tile cost at most 2 % more triangles than one mesh") {
+TEST_CASE("two strips of a 257 x 257 tile cost at most 2 % more triangles than one mesh, and "
+          "two more per vertex of the cut") {
+    // The locked cut column (128) holds its 1-D fit, which the whole mesh need not: about two
+    // triangles per interior vertex of that fit, which is what dominates a coarse mesh of a
+    // few hundred triangles.
     const HeightGrid g = terrain::noise(257, 257, 21, 300.0, 2.0);
     for (double eps : {1.0, 8.0}) {
         const TriangulateOptions opt{.eps = eps, .lock_border = true};
         const std::size_t whole = tb::core::triangulate(g, opt).triangle_count();
         const std::size_t split = strips_and_judge(g, opt, 2).triangle_count();
-        INFO("eps=", eps, " whole ", whole, " strips ", split);
+        const std::size_t cut = column_fit(g, 128, opt).size() - 2;
+        INFO("eps=", eps, " whole ", whole, " strips ", split, " cut vertices ", cut);
         CHECK(split >= whole / 2);
-        CHECK(static_cast<double>(split) <= 1.02 * static_cast<double>(whole));
+        CHECK(static_cast<double>(split) <=
+              1.02 * static_cast<double>(whole) + 2.0 * static_cast<double>(cut));
     }
 }
 
