@@ -29,9 +29,9 @@ public:
     // and no edge is longer than max_edge. Swaps never create an edge over max_edge.
     void split_until_clean();
 
-    // One pass of the merge agent (merge.cpp) over the vertices, flattest neighbourhood first:
-    // a vertex is removed when the optimal re-triangulation of its hole has no more error points
-    // than its neighbourhood had. Vertices already tried whose neighbourhood has not changed
+    // One pass of the merge agent (merge.cpp) over the vertices, along the Z-order curve (fewer
+    // error points around first, when there are any): a vertex is removed when the optimal
+    // re-triangulation of its hole has no more error points than its neighbourhood had. Vertices already tried whose neighbourhood has not changed
     // since are skipped. Returns the number of vertices removed.
     std::size_t merge_pass();
 
