@@ -31,8 +31,9 @@ public:
 
     // One pass of the merge agent (merge.cpp) over the vertices, along the Z-order curve (fewer
     // error points around first, when there are any): a vertex is removed when the optimal
-    // re-triangulation of its hole has no more error points than its neighbourhood had. Vertices already tried whose neighbourhood has not changed
-    // since are skipped. Returns the number of vertices removed.
+    // re-triangulation of its hole has no more error points than its neighbourhood had.
+    // Vertices already tried whose neighbourhood has not changed since are skipped. Returns the
+    // number of vertices removed.
     std::size_t merge_pass();
 
     // Renumbers vertices and triangles along a Z-order curve (Tin::compact) so that the merge

@@ -85,25 +85,23 @@ public:
     // About two triangles per cell. The cells' lists are laid end to end (a count, then a
     // fill, each triangle in ascending order): one allocation where a list per cell made tens
     // of millions over a globe-terrain build.
-    explicit TriangleBuckets(SurfaceMesh mesh)
-        : q_(std::move(mesh)),
-          cells_per_side_(
-              std::clamp(static_cast<int>(std::sqrt(static_cast<double>(q_.triangles.size()) / 6)),
-                         16,
-                         1024)) {
+    // Everything error_at needs is copied out of q, which need not outlive the buckets.
+    explicit TriangleBuckets(const SurfaceMesh& q)
+        : cells_per_side_(std::clamp(
+              static_cast<int>(std::sqrt(static_cast<double>(q.triangles.size()) / 6)), 16, 1024)) {
         const std::size_t cells = static_cast<std::size_t>(cells_per_side_) * cells_per_side_;
-        const std::size_t triangles = q_.triangles.size() / 3;
+        const std::size_t triangles = q.triangles.size() / 3;
         // Each triangle's corners, heights and area, read once here instead of through the
         // index for every probe, and its box of cells, found once for both passes. A triangle
         // of zero area holds no probe and is left out.
         corners_.resize(triangles);
         std::vector<std::array<int, 4>> box(triangles); // first column, last, first row, last
         for (std::size_t t = 0; t < triangles; ++t) {
-            const std::uint32_t a = q_.triangles[3 * t], b = q_.triangles[3 * t + 1],
-                                c = q_.triangles[3 * t + 2];
+            const std::uint32_t a = q.triangles[3 * t], b = q.triangles[3 * t + 1],
+                                c = q.triangles[3 * t + 2];
             Corners& k = corners_[t];
-            k.ua = q_.u[a], k.va = q_.v[a], k.ub = q_.u[b], k.vb = q_.v[b], k.uc = q_.u[c],
-            k.vc = q_.v[c], k.ha = q_.h[a], k.hb = q_.h[b], k.hc = q_.h[c];
+            k.ua = q.u[a], k.va = q.v[a], k.ub = q.u[b], k.vb = q.v[b], k.uc = q.u[c],
+            k.vc = q.v[c], k.ha = q.h[a], k.hb = q.h[b], k.hc = q.h[c];
             k.area = (k.ub - k.ua) * (k.vc - k.va) - (k.uc - k.ua) * (k.vb - k.va);
             if (k.area == 0) {
                 box[t] = {0, -1, 0, -1};
@@ -192,7 +190,6 @@ private:
         return std::clamp(
             static_cast<int>(w * cells_per_side_ / (kQuantizedMax + 1.0)), 0, cells_per_side_ - 1);
     }
-    SurfaceMesh q_;
     int cells_per_side_;
     static constexpr double kTol = -1e-9; // the least barycentric weight of a point held
     static constexpr double kSlack = 1e-3;
