@@ -120,18 +120,51 @@ double max_error(const Mesh& mesh, const HeightGrid& grid) {
             std::int64_t wc = orient2d(a, b, first);
             const std::int64_t sa = -(std::int64_t{c.y} - b.y), sb = -(std::int64_t{a.y} - c.y),
                                sc = -(std::int64_t{b.y} - a.y);
-            for (std::int64_t xx = lo; xx <= hi; ++xx, wa += sa, wb += sb, wc += sc) {
+            const std::size_t row = static_cast<std::size_t>(y) * static_cast<std::size_t>(w);
+            std::fill(covered.begin() + static_cast<std::ptrdiff_t>(row + lo),
+                      covered.begin() + static_cast<std::ptrdiff_t>(row + hi + 1),
+                      std::uint8_t{1});
+            // Sample xx at weights (wa, wb, wc), anywhere in the closed triangle.
+            const auto judge = [&](std::int64_t xx) {
                 const GridPoint p{static_cast<std::int32_t>(xx), y};
                 TB_ASSERT(wa >= 0 && wb >= 0 && wc >= 0);
                 TB_ASSERT(wa == orient2d(b, c, p) && wc == orient2d(a, b, p));
-                const std::size_t idx = static_cast<std::size_t>(y) * w + p.x;
-                covered[idx] = 1;
                 if (!grid.is_valid(p.x, y)) {
-                    continue;
+                    return;
                 }
                 const double z = interpolate(a, za, b, zb, c, zc, wa, wb, wc, inv_area, p);
-                worst = std::max(worst, std::abs(z - static_cast<double>(grid.heights[idx])));
+                worst = std::max(worst, std::abs(z - static_cast<double>(grid.heights[row + p.x])));
+            };
+            // Off a horizontal edge's row only the span's two ends can lie on an edge (each
+            // edge line crosses the row once, where its weight reaches 0, which bounds the
+            // span): the samples between take interpolate()'s inside formula directly.
+            const bool edge_row =
+                (a.y == y && b.y == y) || (b.y == y && c.y == y) || (c.y == y && a.y == y);
+            if (edge_row || hi - lo < 2) {
+                for (std::int64_t xx = lo; xx <= hi; ++xx, wa += sa, wb += sb, wc += sc) {
+                    judge(xx);
+                }
+                continue;
             }
+            judge(lo);
+            wa += sa, wb += sb, wc += sc;
+            const float* heights = grid.heights.data() + row;
+            const std::uint8_t* valid = grid.valid.empty() ? nullptr : grid.valid.data() + row;
+            for (std::int64_t xx = lo + 1; xx < hi; ++xx, wa += sa, wb += sb, wc += sc) {
+                TB_ASSERT(wa > 0 && wb > 0 && wc > 0);
+                if (valid != nullptr && valid[xx] == 0) {
+                    continue;
+                }
+                const double z = interpolate_inside(static_cast<double>(wa),
+                                                    static_cast<double>(wb),
+                                                    static_cast<double>(wc),
+                                                    za,
+                                                    zb,
+                                                    zc,
+                                                    inv_area);
+                worst = std::max(worst, std::abs(z - static_cast<double>(heights[xx])));
+            }
+            judge(hi);
         }
     }
     for (std::size_t i = 0; i < covered.size(); ++i) {

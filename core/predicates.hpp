@@ -38,8 +38,8 @@ inline int incircle(GridPoint a, GridPoint b, GridPoint c, GridPoint d) {
         const std::int64_t alift = adx * adx + ady * ady;
         const std::int64_t blift = bdx * bdx + bdy * bdy;
         const std::int64_t clift = cdx * cdx + cdy * cdy;
-        const std::int64_t det = alift * (bdx * cdy - cdx * bdy) +
-                                 blift * (cdx * ady - adx * cdy) + clift * (adx * bdy - bdx * ady);
+        const std::int64_t det = alift * (bdx * cdy - cdx * bdy) + blift * (cdx * ady - adx * cdy) +
+                                 clift * (adx * bdy - bdx * ady);
         return det > 0 ? 1 : (det < 0 ? -1 : 0);
     }
     using W = Int128;
@@ -132,14 +132,18 @@ inline double interpolate(GridPoint a,
                               inv_area);
 }
 
-// floor(n / d) and ceil(n / d) for d > 0.
+// floor(n / d) and ceil(n / d) for d > 0 and |n|, d < 2^52 (every caller's values are
+// products of two grid coordinates, below 2^42). Exact: both are held exactly in doubles, their
+// rounded quotient truncated is floor(n / d) or one more, and the remainder says which. A
+// double division pipelines where a 64-bit integer one stalls for tens of cycles, and the error
+// scan divides a few times per triangle.
 inline std::int64_t floor_div(std::int64_t n, std::int64_t d) {
-    const std::int64_t q = n / d;
-    return (n % d != 0 && n < 0) ? q - 1 : q;
+    const std::int64_t q =
+        static_cast<std::int64_t>(static_cast<double>(n) / static_cast<double>(d)); // toward zero
+    return n - q * d < 0 ? q - 1 : q;
 }
 inline std::int64_t ceil_div(std::int64_t n, std::int64_t d) {
-    const std::int64_t q = n / d;
-    return (n % d != 0 && n > 0) ? q + 1 : q;
+    return -floor_div(-n, d);
 }
 
 } // namespace tb::core

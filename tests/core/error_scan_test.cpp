@@ -81,6 +81,37 @@ GridPoint random_point(terrain::Lcg& r, int w, int h) {
 
 } // namespace
 
+TEST_CASE("floor_div and ceil_div round exactly, near multiples and up to 2^42") {
+    // The reference: integer division, corrected toward minus infinity.
+    const auto floor_ref = [](std::int64_t n, std::int64_t d) {
+        const std::int64_t q = n / d;
+        return (n % d != 0 && n < 0) ? q - 1 : q;
+    };
+    terrain::Lcg r(42);
+    for (int i = 0; i < 2000000; ++i) {
+        const int bits_d = 1 + static_cast<int>(r.next() * 21);
+        const int bits_n = 1 + static_cast<int>(r.next() * 42);
+        const std::int64_t d = 1 + static_cast<std::int64_t>(r.next() * std::ldexp(1.0, bits_d));
+        std::int64_t n = static_cast<std::int64_t>(r.next() * std::ldexp(1.0, bits_n));
+        if (i % 3 == 0) {
+            n = n / d * d + static_cast<std::int64_t>(r.next() * 3) - 1; // next to a multiple
+        }
+        if (i % 2 == 1) {
+            n = -n;
+        }
+        REQUIRE(tb::core::floor_div(n, d) == floor_ref(n, d));
+        REQUIRE(tb::core::ceil_div(n, d) == -floor_ref(-n, d));
+    }
+    const std::int64_t big = std::int64_t{1} << 42;
+    for (std::int64_t d :
+         {std::int64_t{1}, std::int64_t{3}, std::int64_t{1} << 20, (std::int64_t{1} << 21) - 1}) {
+        for (std::int64_t n : {big - 1, big, big + 1, -big - 1, -big, -big + 1, std::int64_t{0}}) {
+            CHECK(tb::core::floor_div(n, d) == floor_ref(n, d));
+            CHECK(tb::core::ceil_div(n, d) == -floor_ref(-n, d));
+        }
+    }
+}
+
 TEST_CASE("scan_triangle equals a brute-force walk of the bounding box (seeds 1-3000)") {
     for (std::uint64_t seed = 1; seed <= 3000; ++seed) {
         terrain::Lcg r(seed);

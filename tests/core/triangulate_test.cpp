@@ -127,3 +127,36 @@ TEST_CASE("a cliff one sample wide is resolved within eps on both sides (seed 0)
     const Mesh m = mesh_and_judge(g, 0.5);
     CHECK(m.triangle_count() <= 10);
 }
+
+TEST_CASE("max_error equals the oracle's largest error where the heights moved (seeds 1-40)") {
+    // The mesh of one grid judged against another: errors land inside triangles, on their
+    // edges, on the rows of horizontal edges and at vertices, with and without a mask, so
+    // every path of the guarantee check (span ends, span insides) is compared with the oracle.
+    for (std::uint64_t seed = 1; seed <= 40; ++seed) {
+        const HeightGrid g = terrain::named(kKinds[seed % kKinds.size()], 47, 33, seed);
+        const Mesh m = tb::core::triangulate(g, TriangulateOptions{.eps = 2.0});
+        HeightGrid moved = g;
+        std::vector<std::uint8_t> vertex(g.heights.size(), 0); // vertices keep their heights
+        for (const tb::core::GridPoint& p : m.points) {
+            vertex[static_cast<std::size_t>(p.y) * g.width + p.x] = 1;
+        }
+        terrain::Lcg r(seed);
+        for (std::size_t i = 0; i < moved.heights.size(); ++i) {
+            const double shift = r.next() < 0.2 ? 64.0 * r.next() - 32.0 : 0.0;
+            if (vertex[i] == 0) {
+                moved.heights[i] = terrain::quantize(moved.heights[i] + shift);
+            }
+        }
+        if (seed % 2 == 0) {
+            moved.valid.assign(moved.heights.size(), 1);
+            for (std::uint8_t& ok : moved.valid) {
+                ok = r.next() < 0.3 ? 0 : 1;
+            }
+        }
+        INFO("seed ", seed);
+        const oracle::Verdict v = oracle::judge(m, moved, 1.0e6);
+        REQUIRE_MESSAGE(v.problem.empty(), v.problem);
+        CHECK(tb::core::max_error(m, moved) ==
+              doctest::Approx(static_cast<double>(v.max_error)).epsilon(1e-12));
+    }
+}
