@@ -483,7 +483,7 @@ std::string glb_container(std::string json, std::string_view bin) {
     return out;
 }
 
-ErrorBudget error_budget(double eps) {
+ErrorBudget error_budget(double eps, double sag_share) {
     if (!std::isfinite(eps) || !(eps > 0)) {
         throw InputError("eps " + std::to_string(eps) + ": expected a finite number of metres > 0");
     }
@@ -501,7 +501,7 @@ ErrorBudget error_budget(double eps) {
     b.eps = eps;
     b.quant_step = s;
     b.quant_error = per_step * s;
-    b.sag = eps * kSagShare;
+    b.sag = eps * sag_share;
     b.max_edge_m = std::sqrt(6 * kSagRadius * b.sag / kSagMargin);
     b.mesh_eps = eps - b.quant_error - b.sag;
     b.drawn_bound = eps;
@@ -522,9 +522,9 @@ double sample_spacing_m(Scheme scheme, int z, int size) {
     return kPi / 180 * (kA * kA / kB) * tile_deg / size;
 }
 
-ErrorBudget spacing_error_budget(double eps, double spacing_m, double min_edge) {
+ErrorBudget spacing_error_budget(double eps, double spacing_m, double min_edge, double sag_share) {
     TB_ASSERT(spacing_m > 0 && min_edge >= core::kMinMaxEdge);
-    ErrorBudget b = error_budget(eps);
+    ErrorBudget b = error_budget(eps, sag_share);
     b.max_edge = b.max_edge_m / spacing_m;
     if (b.max_edge < min_edge) {
         b.max_edge = min_edge;
@@ -539,8 +539,9 @@ ErrorBudget spacing_error_budget(double eps, double spacing_m, double min_edge) 
     return b;
 }
 
-ErrorBudget tile_error_budget(double eps, Scheme scheme, int z, int size) {
-    return spacing_error_budget(eps, sample_spacing_m(scheme, z, size), core::kMinMaxEdge);
+ErrorBudget tile_error_budget(double eps, Scheme scheme, int z, int size, double sag_share) {
+    return spacing_error_budget(
+        eps, sample_spacing_m(scheme, z, size), core::kMinMaxEdge, sag_share);
 }
 
 std::string encode_tile(const TileRaster& raster,

@@ -91,7 +91,8 @@ Value between(const Window& w,
 
 } // namespace
 
-ErrorBudget pixel_error_budget(double eps, Scheme scheme, const PixelGrid& pixels) {
+ErrorBudget
+pixel_error_budget(double eps, Scheme scheme, const PixelGrid& pixels, double sag_share) {
     constexpr double kA = 6378137.0, kF = 1 / 298.257223563, kB = kA * (1 - kF);
     constexpr double kPi = 3.14159265358979323846;
     // Ground metres per pixel step, an upper bound in every direction: geodetic, degrees times
@@ -99,7 +100,8 @@ ErrorBudget pixel_error_budget(double eps, Scheme scheme, const PixelGrid& pixel
     // ground metres).
     (void)scheme;
     const double unit = pixels.lonlat ? kPi / 180 * kA * kA / kB : 1.0;
-    return spacing_error_budget(eps, std::max(pixels.dx, pixels.dy) * unit, kMinPixelEdge);
+    return spacing_error_budget(
+        eps, std::max(pixels.dx, pixels.dy) * unit, kMinPixelEdge, sag_share);
 }
 
 PixelTile make_pixel_tile(const DemSource& source,

@@ -58,9 +58,13 @@ PixelTile make_pixel_tile(const DemSource& source,
                           const TileId& id,
                           VerticalDatum datum);
 
-// The error budget of a pixel tile: error_budget(eps) with the longest edge in pixels (the larger
-// of the two pixel sides, in ground metres, is the unit), the same for every tile of the source.
-ErrorBudget pixel_error_budget(double eps, Scheme scheme, const PixelGrid& pixels);
+// The error budget of a pixel tile: error_budget(eps, sag_share) with the longest edge in pixels
+// (the larger of the two pixel sides, in ground metres, is the unit), the same for every tile of
+// the source.
+ErrorBudget pixel_error_budget(double eps,
+                               Scheme scheme,
+                               const PixelGrid& pixels,
+                               double sag_share = kSagShare);
 
 // The tile's mesh: core::triangulate_strips on the block at budget.mesh_eps with locked borders,
 // the border strips and corners zipped on. Every valid pixel of the block is within
