@@ -155,13 +155,7 @@ double max_error(const Mesh& mesh, const HeightGrid& grid) {
                 if (valid != nullptr && valid[xx] == 0) {
                     continue;
                 }
-                const double z = interpolate_inside(static_cast<double>(wa),
-                                                    static_cast<double>(wb),
-                                                    static_cast<double>(wc),
-                                                    za,
-                                                    zb,
-                                                    zc,
-                                                    inv_area);
+                const double z = interpolate_inside(wa, wb, wc, za, zb, zc, inv_area);
                 worst = std::max(worst, std::abs(z - static_cast<double>(heights[xx])));
             }
             judge(hi);

@@ -88,6 +88,22 @@ inline double interpolate_inside(
     double wa, double wb, double wc, double za, double zb, double zc, double inv_area) {
     return (wa * za + wb * zb + wc * zc) * inv_area;
 }
+// The same from the integer numerators, each converted exactly.
+inline double interpolate_inside(std::int64_t wa,
+                                 std::int64_t wb,
+                                 std::int64_t wc,
+                                 double za,
+                                 double zb,
+                                 double zc,
+                                 double inv_area) {
+    return interpolate_inside(static_cast<double>(wa),
+                              static_cast<double>(wb),
+                              static_cast<double>(wc),
+                              za,
+                              zb,
+                              zc,
+                              inv_area);
+}
 
 // Height of the triangle (a, b, c) at p, given p's exact barycentric numerators
 // wa = orient2d(b, c, p), wb = orient2d(c, a, p), wc = orient2d(a, b, p) (all >= 0) and
@@ -123,13 +139,7 @@ inline double interpolate(GridPoint a,
         }
         return lerp_edge(c, zc, a, za, p);
     }
-    return interpolate_inside(static_cast<double>(wa),
-                              static_cast<double>(wb),
-                              static_cast<double>(wc),
-                              za,
-                              zb,
-                              zc,
-                              inv_area);
+    return interpolate_inside(wa, wb, wc, za, zb, zc, inv_area);
 }
 
 // floor(n / d) and ceil(n / d) for d > 0 and |n|, d < 2^52 (every caller's values are
