@@ -143,10 +143,10 @@ inline double interpolate(GridPoint a,
 }
 
 // floor(n / d) and ceil(n / d) for d > 0 and |n|, d < 2^52 (every caller's values are
-// products of two grid coordinates, below 2^42). Exact: both are held exactly in doubles, their
-// rounded quotient truncated is floor(n / d) or one more, and the remainder says which. A
-// double division pipelines where a 64-bit integer one stalls for tens of cycles, and the error
-// scan divides a few times per triangle.
+// products of two grid coordinates, below 2^42, or a row step times the scan's stride). Exact: both
+// are held exactly in doubles, their rounded quotient truncated is floor(n / d) or one more, and
+// the remainder says which. A double division pipelines where a 64-bit integer one stalls for tens
+// of cycles, and the error scan divides a few times per triangle.
 inline std::int64_t floor_div(std::int64_t n, std::int64_t d) {
     const std::int64_t q =
         static_cast<std::int64_t>(static_cast<double>(n) / static_cast<double>(d)); // toward zero

@@ -44,10 +44,11 @@ struct ErrorBudget {
 inline constexpr double kSagRadius = 6335439.0;
 inline constexpr double kSagMargin = 2.0;
 // The share of eps reserved for sag. A smaller share shortens the longest edge allowed (as the
-// square root of the share) and leaves the mesher more of eps everywhere else: measured on the
-// SRTM cells of bench/ (tile_bench, terrain_bench, build_bench), a tenth gives 5-24 % fewer
-// triangles and bytes per tile, and 0-39 % less time per tile, than the quarter it replaced,
-// with long edges binding only on flat ground, where a tile is cheap anyway.
+// square root of the share) and leaves the mesher more of eps everywhere else. Measured on the
+// SRTM cells of bench/ (tile_bench, build_bench; README "The sag share"), a tenth against the
+// quarter it replaced: 3-22 % fewer triangles and bytes per tile and up to 27 % less time on
+// rough or mixed ground, and about the same (0.7 % more triangles) on flat ground at the finest
+// zoom, where the shorter edges bind.
 inline constexpr double kSagShare = 0.10;
 // Globe terrain (quantized-mesh and 3D Tiles terrain) keeps a quarter: its 15-bit lattice moves
 // every vertex across the slope by up to half a step (1.7 m on a zoom-8 tile), and on steep
