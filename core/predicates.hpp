@@ -38,8 +38,8 @@ inline int incircle(GridPoint a, GridPoint b, GridPoint c, GridPoint d) {
         const std::int64_t alift = adx * adx + ady * ady;
         const std::int64_t blift = bdx * bdx + bdy * bdy;
         const std::int64_t clift = cdx * cdx + cdy * cdy;
-        const std::int64_t det = alift * (bdx * cdy - cdx * bdy) + blift * (cdx * ady - adx * cdy) +
-                                 clift * (adx * bdy - bdx * ady);
+        const std::int64_t det = alift * (bdx * cdy - cdx * bdy) +
+                                 blift * (cdx * ady - adx * cdy) + clift * (adx * bdy - bdx * ady);
         return det > 0 ? 1 : (det < 0 ? -1 : 0);
     }
     using W = Int128;

@@ -189,7 +189,7 @@ public:
         spec.root_error = relief() * std::exp2(std::max(min_zoom_ - 1, 0));
         for (int z = min_zoom_; z <= max_zoom_; ++z) {
             spec.root_error = std::max(
-                spec.root_error, budget_at(z, eps_for_zoom(z), true).drawn_bound * std::exp2(z));
+                spec.root_error, terrain_budget_at(z, eps_for_zoom(z)).drawn_bound * std::exp2(z));
         }
         const double lo = spec.min_height, hi = spec.max_height;
         spec.bounds = [lo, hi](const TileId& id) {
@@ -341,7 +341,7 @@ public:
         check_eps(eps, "eps");
         check_id(id);
         MeshedTile t;
-        t.budget = budget_at(id.z, eps, !drop_voids);
+        t.budget = drop_voids ? budget_at(id.z, eps) : terrain_budget_at(id.z, eps);
         if (pixels_) {
             PixelTile pixel = make_pixel_tile(*source_, *pixels_, options_.scheme, id, datum_);
             std::vector<std::uint8_t> valid;
@@ -542,7 +542,7 @@ private:
         // past its bound the worst samples become vertices (quantize_within). The border lines
         // keep the vertices the zoom's eps gave them, so neighbouring tiles still share them.
         const double eps = eps_for_zoom(id.z);
-        const double target = budget_at(id.z, eps, true).drawn_bound;
+        const double target = terrain_budget_at(id.z, eps).drawn_bound;
         TerrainDraft draft;
         MeshedTile& t = draft.meshed;
         t = mesh_at(id, eps, false);
@@ -577,7 +577,7 @@ private:
                        : encode_terrain_glb(draft.tile);
         }
         const MeshedTile& t = draft.meshed;
-        const double target = budget_at(id.z, eps_for_zoom(id.z), true).drawn_bound;
+        const double target = terrain_budget_at(id.z, eps_for_zoom(id.z)).drawn_bound;
         TerrainTile& tile = draft.tile;
         double drawn = draft.quantized; // what the encoded format draws, at every sample
         if (format == Format::Terrain3d) {
@@ -918,13 +918,16 @@ private:
     }
 
     // The error budget of zoom z's tiles at eps: in source pixels for pixel tiles, in lattice
-    // samples otherwise (the longest edge must be the same for every tile of a zoom). Globe
-    // terrain (quantized-mesh and 3D Tiles terrain) keeps its own share for sag
-    // (kTerrainSagShare).
-    ErrorBudget budget_at(int z, double eps, bool terrain = false) const {
-        const double share = terrain ? kTerrainSagShare : kSagShare;
-        return pixels_ ? pixel_error_budget(eps, options_.scheme, *pixels_, share)
-                       : tile_error_budget(eps, options_.scheme, z, options_.tile_size, share);
+    // samples otherwise (the longest edge must be the same for every tile of a zoom).
+    ErrorBudget budget_at(int z, double eps) const { return budget_with(z, eps, kSagShare); }
+    // The same for globe terrain (quantized-mesh and 3D Tiles terrain), which keeps its own
+    // share for sag (kTerrainSagShare).
+    ErrorBudget terrain_budget_at(int z, double eps) const {
+        return budget_with(z, eps, kTerrainSagShare);
+    }
+    ErrorBudget budget_with(int z, double eps, double sag_share) const {
+        return pixels_ ? pixel_error_budget(eps, options_.scheme, *pixels_, sag_share)
+                       : tile_error_budget(eps, options_.scheme, z, options_.tile_size, sag_share);
     }
 
     // Records a measured tile's published error (tiles at the ladder's eps only: that is the
