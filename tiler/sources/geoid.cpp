@@ -37,9 +37,12 @@ double egm96_undulation(double lon, double lat) {
     // Cell-centre coordinates: column c sits at lon t0 + (c + 0.5) t1.
     double u = (lon - t[0]) / t[1] - 0.5;
     double v = (std::clamp(lat, -90.0, 90.0) - t[3]) / t[5] - 0.5;
-    u = std::fmod(u, static_cast<double>(g.width));
-    if (u < 0) {
-        u += g.width;
+    // Wrapped into [0, width): fmod is slow and, for a u already there, returns it unchanged.
+    if (!(u >= 0 && u < static_cast<double>(g.width))) {
+        u = std::fmod(u, static_cast<double>(g.width));
+        if (u < 0) {
+            u += g.width;
+        }
     }
     v = std::clamp(v, 0.0, static_cast<double>(g.height - 1));
     const int c0 = std::min(static_cast<int>(u), g.width - 1);
