@@ -300,20 +300,23 @@ public:
     std::string encode_at(const TileId& id, Format format, double eps, bool with_normals) const {
         const MeshedTile t = mesh_tile_at(id, eps);
         // Shading normals, the same function of position as the terrain tiles' (encode_tile
-        // neither adds nor reorders vertices, so they stay aligned with the mesh).
-        std::vector<std::array<double, 3>> normals;
+        // neither adds nor reorders vertices, so they stay aligned with the mesh), made by
+        // encode_tile when it needs them: beside its check, when it has two threads.
+        NormalsFn make_normals;
         if (with_normals && t.mesh.triangle_count() > 0) {
-            normals = vertex_normals(t, id);
+            make_normals = [&] { return vertex_normals(t, id); };
         }
-        return encode_meshed(t, normals, id, format, eps);
+        return encode_meshed(t, {}, id, format, eps, make_normals);
     }
 
-    // A meshed tile encoded as glb or drc, with `normals` (none when empty).
+    // A meshed tile encoded as glb or drc, with `normals` (none when empty, unless
+    // make_normals makes them).
     std::string encode_meshed(const MeshedTile& t,
                               const std::vector<std::array<double, 3>>& normals,
                               const TileId& id,
                               Format format,
-                              double eps) const {
+                              double eps,
+                              const NormalsFn& make_normals = {}) const {
         EncodeReport report;
         std::string bytes = encode_tile(t.raster,
                                         t.mesh,
@@ -321,7 +324,9 @@ public:
                                         t.budget,
                                         t.source_pixels,
                                         &report,
-                                        normals.empty() ? nullptr : &normals);
+                                        normals.empty() ? nullptr : &normals,
+                                        options_.mesh_threads,
+                                        make_normals);
         if (guarantee() == Guarantee::Measured) {
             note_measured(id, eps, report);
         }

@@ -555,6 +555,76 @@ TEST_CASE("tiny tiles at fine eps still decode exactly onto the lattice") {
     CHECK(encoded >= 24);
 }
 
+TEST_CASE("encode_tile writes the same bytes on one thread and on two, with normals given or "
+          "made on demand, and when the first lattice must be refined") {
+    const Terrain mesa = [](std::int64_t c, std::int64_t r) {
+        const std::int64_t i = c % 64, j = r % 64;
+        return (i >= 20 && i < 41 && j >= 18 && j < 45) ? 1300.0f : 300.0f + 0.01f * float(i);
+    };
+    struct Case {
+        const char* name;
+        TileRaster raster;
+        double eps;
+    };
+    // hills: the first lattice holds; the mesa's cliffs: it is refined (the early encoding of
+    // the second thread is thrown away). Both have 64 rows or more, so the check splits its
+    // rows between two threads where it runs alone.
+    const Case cases[] = {{"hills", make_raster({12, 2000, 1500}, 128, hills(4, 100)), 1.0},
+                          {"mesa", make_raster({14, 9000, 11000}, 64, mesa), 1.0}};
+    for (const Case& c : cases) {
+        CAPTURE(std::string(c.name));
+        const ErrorBudget b = error_budget(c.eps);
+        const TileMesh tm =
+            to_tile_mesh(c.raster, core::triangulate(c.raster.grid, {b.mesh_eps, true}), false);
+        std::vector<std::array<double, 3>> normals;
+        for (std::size_t v = 0; v < tm.vertex_count(); ++v) {
+            const double a = 0.001 * static_cast<double>(v % 97);
+            const double len = std::sqrt(1 + 2 * a * a);
+            normals.push_back({a / len, a / len, 1 / len});
+        }
+        int made = 0;
+        const NormalsFn make = [&] {
+            ++made;
+            return normals;
+        };
+        // Check points (every sample, as the layer gives measured tiles): the .drc's eps_m then
+        // waits for them, so it is encoded after the check even with two threads.
+        std::vector<CheckPoint> points;
+        for (int row = 0; row < c.raster.grid.height; row += 7) {
+            for (int col = 0; col < c.raster.grid.width; col += 5) {
+                points.push_back({double(col), double(row), c.raster.grid.at(col, row)});
+            }
+        }
+        for (Format f : {Format::Glb, Format::Drc}) {
+            CAPTURE(f == Format::Glb ? "glb" : "drc");
+            const std::vector<CheckPoint> no_points;
+            for (bool with_points : {true, false}) {
+                const std::vector<CheckPoint>& p = with_points ? points : no_points;
+                CAPTURE(p.size());
+                EncodeReport one_report, two_report;
+                const std::string one =
+                    encode_tile(c.raster, tm, f, b, p, &one_report, &normals, 1);
+                made = 0;
+                const std::string two =
+                    encode_tile(c.raster, tm, f, b, p, &two_report, nullptr, 2, make);
+                CHECK(made == 1);
+                CHECK(two == one);
+                CHECK(two_report.published == one_report.published);
+                CHECK(two_report.points_error == one_report.points_error);
+                made = 0;
+                CHECK(encode_tile(c.raster, tm, f, b, p, nullptr, nullptr, 1, make) == one);
+                CHECK(made == 1);
+                CHECK(encode_tile(c.raster, tm, f, b, p, nullptr, &normals, 2) == one);
+            }
+        }
+        if (std::string(c.name) == "mesa") {
+            const DecodedTile d =
+                decode_drc(encode_tile(c.raster, tm, Format::Drc, b, {}, nullptr, nullptr, 2));
+            CHECK(d.metadata.doubles.at("quant_step_m") < b.quant_step); // refined
+        }
+    }
+}
+
 TEST_CASE("normals handed to encode_tile decode at their own vertices, in each format's axes, "
           "and move no position (seed 4)") {
     const TileRaster r = make_raster({12, 2000, 1500}, 32, hills(4, 100));

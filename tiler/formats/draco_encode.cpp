@@ -27,12 +27,15 @@
 #include <charconv>
 #include <cmath>
 #include <cstring>
+#include <future>
 #include <limits>
 #include <memory>
 
 namespace tb::tiler {
 namespace {
 
+// The drawn-surface check splits its rows between two threads from this many rows on.
+constexpr int kMinRowsToSplit = 64;
 constexpr int kDracoSpeed = 5; // Draco's default trade-off; fixed for determinism
 // Draco quantizes with floor(v / s + 0.5f) in float32, exact only while v / s < 2^23 (above it
 // the + 0.5 rounds to even); float32 positions are exact below 2^24 steps.
@@ -158,7 +161,8 @@ SnappedTriangle snapped_triangle(const TileMesh& mesh, const GridVertices& g, st
     return {a, b, c, (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1])};
 }
 
-Verdict snapped_error(const TileRaster& raster, const TileMesh& mesh, const GridVertices& g) {
+Verdict
+snapped_error(const TileRaster& raster, const TileMesh& mesh, const GridVertices& g, int threads) {
     const core::HeightGrid& grid = raster.grid;
     const int width = grid.width, height = grid.height;
     const std::size_t count = static_cast<std::size_t>(width) * height;
@@ -196,46 +200,60 @@ Verdict snapped_error(const TileRaster& raster, const TileMesh& mesh, const Grid
     // within a band of +-band around the row, widened by band. A sample within the slack of a
     // triangle lies at most 1e-9 of the triangle's height outside it (a few 1e-9 of its
     // extent), so a band of 1e-3 pixels plus 1e-8 of the extent finds it, however far a
-    // vertex lies (a snapped pole can sit far outside the tile).
-    for (std::size_t t = 0; t < mesh.triangle_count(); ++t) {
-        const auto [a, b, c, det] = snapped_triangle(mesh, g, t);
-        if (det == 0) {
-            continue;
-        }
-        const std::array<double, 3>* corner[3] = {&a, &b, &c};
-        const double extent = std::max(hi3(a[0], b[0], c[0]) - lo3(a[0], b[0], c[0]),
-                                       hi3(a[1], b[1], c[1]) - lo3(a[1], b[1], c[1]));
-        const double band = 1e-3 + 1e-8 * extent;
-        const int y0 = std::max(0, static_cast<int>(std::ceil(lo3(a[1], b[1], c[1]) - band)));
-        const int y1 =
-            std::min(height - 1, static_cast<int>(std::floor(hi3(a[1], b[1], c[1]) + band)));
-        for (int y = y0; y <= y1; ++y) {
-            const double band_lo = y - band, band_hi = y + band;
-            double x_lo = std::numeric_limits<double>::infinity(), x_hi = -x_lo;
-            for (int i = 0; i < 3; ++i) {
-                const auto& p = *corner[i];
-                const auto& q = *corner[(i + 1) % 3];
-                if (p[1] >= band_lo && p[1] <= band_hi) {
-                    x_lo = std::min(x_lo, p[0]);
-                    x_hi = std::max(x_hi, p[0]);
-                }
-                for (const double yb : {band_lo, band_hi}) {
-                    if ((p[1] < yb && yb < q[1]) || (q[1] < yb && yb < p[1])) {
-                        const double x = p[0] + (yb - p[1]) * (q[0] - p[0]) / (q[1] - p[1]);
-                        x_lo = std::min(x_lo, x);
-                        x_hi = std::max(x_hi, x);
-                    }
-                }
-            }
-            if (!(x_lo <= x_hi)) {
+    // vertex lies (a snapped pole can sit far outside the tile). Rows [first, last] only: each
+    // sample is visited by the triangles in the same order whichever rows a call takes, so
+    // row ranges on separate threads give the same bits as one pass.
+    const auto pass1 = [&](int first, int last) {
+        for (std::size_t t = 0; t < mesh.triangle_count(); ++t) {
+            const auto [a, b, c, det] = snapped_triangle(mesh, g, t);
+            if (det == 0) {
                 continue;
             }
-            const int x0 = std::max(0, static_cast<int>(std::ceil(x_lo - band)));
-            const int x1 = std::min(width - 1, static_cast<int>(std::floor(x_hi + band)));
-            for (int x = x0; x <= x1; ++x) {
-                visit(a, b, c, det, x, y);
+            const std::array<double, 3>* corner[3] = {&a, &b, &c};
+            const double extent = std::max(hi3(a[0], b[0], c[0]) - lo3(a[0], b[0], c[0]),
+                                           hi3(a[1], b[1], c[1]) - lo3(a[1], b[1], c[1]));
+            const double band = 1e-3 + 1e-8 * extent;
+            const int y0 =
+                std::max(first, static_cast<int>(std::ceil(lo3(a[1], b[1], c[1]) - band)));
+            const int y1 =
+                std::min(last, static_cast<int>(std::floor(hi3(a[1], b[1], c[1]) + band)));
+            for (int y = y0; y <= y1; ++y) {
+                const double band_lo = y - band, band_hi = y + band;
+                double x_lo = std::numeric_limits<double>::infinity(), x_hi = -x_lo;
+                for (int i = 0; i < 3; ++i) {
+                    const auto& p = *corner[i];
+                    const auto& q = *corner[(i + 1) % 3];
+                    if (p[1] >= band_lo && p[1] <= band_hi) {
+                        x_lo = std::min(x_lo, p[0]);
+                        x_hi = std::max(x_hi, p[0]);
+                    }
+                    for (const double yb : {band_lo, band_hi}) {
+                        if ((p[1] < yb && yb < q[1]) || (q[1] < yb && yb < p[1])) {
+                            const double x = p[0] + (yb - p[1]) * (q[0] - p[0]) / (q[1] - p[1]);
+                            x_lo = std::min(x_lo, x);
+                            x_hi = std::max(x_hi, x);
+                        }
+                    }
+                }
+                if (!(x_lo <= x_hi)) {
+                    continue;
+                }
+                const int x0 = std::max(0, static_cast<int>(std::ceil(x_lo - band)));
+                const int x1 = std::min(width - 1, static_cast<int>(std::floor(x_hi + band)));
+                for (int x = x0; x <= x1; ++x) {
+                    visit(a, b, c, det, x, y);
+                }
             }
         }
+    };
+    // Two row halves on two threads for a tile worth it (a cold tile in the server).
+    if (threads >= 2 && height >= kMinRowsToSplit) {
+        const int mid = height / 2;
+        auto lower = std::async(std::launch::async, pass1, mid, height - 1);
+        pass1(0, mid - 1);
+        lower.get();
+    } else {
+        pass1(0, height - 1);
     }
     // Pass 2, the samples pass 1 found in no triangle (border samples a snapped vertex moved a
     // hair away from): each anew against every triangle within a pixel of it, exactly as one
@@ -483,6 +501,167 @@ std::string glb_container(std::string json, std::string_view bin) {
     return out;
 }
 
+// Where a tile's positions are written from: the frame origin (lon/lat at the tile centre, a
+// lattice height), its ENU axes, and the glb node translation; and the tile's height range.
+struct TileFrame {
+    Geodetic centre;
+    EnuFrame enu;
+    std::array<double, 3> translation{};
+    float z_min = 0, z_max = 0;
+};
+
+// The tile's bytes from its snapped lattice (snap, at `step` metres): the Draco mesh, encoded,
+// then decoded again and checked, as clients will decode it. `published` is the .drc's eps_m.
+std::string draco_tile(const TileRaster& raster,
+                       const TileMesh& mesh,
+                       Format format,
+                       const ErrorBudget& budget,
+                       const TileFrame& frame,
+                       const Snapped& snap,
+                       double step,
+                       double published,
+                       const std::vector<std::array<double, 3>>* normals) {
+    const std::size_t n = mesh.vertex_count();
+    const EnuFrame& enu = frame.enu;
+    const Geodetic& centre = frame.centre;
+    // The Draco mesh: lattice points as float32 (exact), triangles counter-clockwise seen from
+    // above as given.
+    draco::Mesh dm;
+    dm.set_num_points(static_cast<draco::PointIndex::ValueType>(n));
+    draco::GeometryAttribute ga;
+    ga.Init(draco::GeometryAttribute::POSITION,
+            nullptr,
+            3,
+            draco::DT_FLOAT32,
+            false,
+            sizeof(float) * 3,
+            0);
+    const int att_id = dm.AddAttribute(ga, true, static_cast<std::uint32_t>(n));
+    draco::PointAttribute* att = dm.attribute(att_id);
+    for (std::size_t v = 0; v < n; ++v) {
+        const float p[3] = {static_cast<float>(double(snap.q[v][0]) * step),
+                            static_cast<float>(double(snap.q[v][1]) * step),
+                            static_cast<float>(double(snap.q[v][2]) * step)};
+        att->SetAttributeValue(draco::AttributeValueIndex(static_cast<std::uint32_t>(v)), p);
+    }
+    // Normals in the positions' axes: glb (x, z, -y) of ECEF, drc the ENU frame's axes.
+    draco::PointAttribute* normal_att = nullptr;
+    if (normals) {
+        draco::GeometryAttribute gn;
+        gn.Init(draco::GeometryAttribute::NORMAL,
+                nullptr,
+                3,
+                draco::DT_FLOAT32,
+                false,
+                sizeof(float) * 3,
+                0);
+        normal_att = dm.attribute(dm.AddAttribute(gn, true, static_cast<std::uint32_t>(n)));
+        for (std::size_t v = 0; v < n; ++v) {
+            const std::array<double, 3>& e = (*normals)[v];
+            std::array<double, 3> out{};
+            if (format == Format::Glb) {
+                out = {e[0], e[2], -e[1]};
+            } else {
+                for (int a = 0; a < 3; ++a) {
+                    out[a] = enu.axes[a][0] * e[0] + enu.axes[a][1] * e[1] + enu.axes[a][2] * e[2];
+                }
+            }
+            const float f[3] = {
+                static_cast<float>(out[0]), static_cast<float>(out[1]), static_cast<float>(out[2])};
+            normal_att->SetAttributeValue(draco::AttributeValueIndex(static_cast<std::uint32_t>(v)),
+                                          f);
+        }
+    }
+    for (std::size_t t = 0; t < mesh.triangle_count(); ++t) {
+        dm.AddFace({draco::PointIndex(mesh.triangles[3 * t]),
+                    draco::PointIndex(mesh.triangles[3 * t + 1]),
+                    draco::PointIndex(mesh.triangles[3 * t + 2])});
+    }
+    if (format == Format::Drc) {
+        auto md = std::make_unique<draco::GeometryMetadata>();
+        md->AddEntryString("schema", kDrcSchema);
+        md->AddEntryString("crs", "EPSG:4979");
+        md->AddEntryString("frame", "ENU");
+        md->AddEntryString("up_axis", "Z");
+        md->AddEntryString("scheme", to_string(raster.scheme));
+        md->AddEntryDouble("origin_lon_deg", centre.lon);
+        md->AddEntryDouble("origin_lat_deg", centre.lat);
+        md->AddEntryDouble("origin_h_m", centre.h);
+        md->AddEntryDouble("west_deg", raster.bounds.west);
+        md->AddEntryDouble("south_deg", raster.bounds.south);
+        md->AddEntryDouble("east_deg", raster.bounds.east);
+        md->AddEntryDouble("north_deg", raster.bounds.north);
+        md->AddEntryDouble("min_h_m", frame.z_min);
+        md->AddEntryDouble("max_h_m", frame.z_max);
+        md->AddEntryDouble("eps_m", published);
+        md->AddEntryString("eps_meaning",
+                           "metres: every valid source DEM pixel centre under the tile is within "
+                           "eps_m, vertically, of the decoded surface");
+        md->AddEntryDouble("quant_step_m", step);
+        md->AddEntryDouble("quant_error_m", budget.quant_error);
+        md->AddEntryInt("level", raster.id.z);
+        md->AddEntryInt("x", static_cast<std::int32_t>(raster.id.x));
+        md->AddEntryInt("y", static_cast<std::int32_t>(raster.id.y));
+        dm.AddMetadata(std::move(md));
+    }
+
+    draco::Encoder encoder;
+    encoder.SetSpeedOptions(kDracoSpeed, kDracoSpeed);
+    encoder.SetEncodingMethod(draco::MESH_EDGEBREAKER_ENCODING);
+    const float origin[3] = {static_cast<float>(double(snap.origin[0]) * step),
+                             static_cast<float>(double(snap.origin[1]) * step),
+                             static_cast<float>(double(snap.origin[2]) * step)};
+    const float range = static_cast<float>(double((std::int64_t{1} << snap.bits) - 1) * step);
+    encoder.SetAttributeExplicitQuantization(
+        draco::GeometryAttribute::POSITION, snap.bits, 3, origin, range);
+    if (normals) {
+        encoder.SetAttributeQuantization(draco::GeometryAttribute::NORMAL, kNormalBits);
+    }
+    draco::EncoderBuffer buffer;
+    check(encoder.EncodeMeshToBuffer(dm, &buffer), "encoding", raster.id);
+    std::string draco_bytes(buffer.data(), buffer.size());
+
+    // Self-check on the decoded data (what clients see): counts kept, every coordinate on the
+    // lattice point it was snapped to; glTF min/max are taken from it.
+    const DecodedTile decoded = decode_drc(draco_bytes);
+    if (decoded.positions.size() != n || decoded.indices.size() != mesh.triangles.size() ||
+        decoded.normals.size() != (normals ? n : 0)) {
+        throw Error("tile " + tile_name(raster.id) + ": Draco changed the mesh (" +
+                    std::to_string(n) + " vertices -> " + std::to_string(decoded.positions.size()) +
+                    "); this is a bug, please report it with the tile");
+    }
+    std::array<double, 3> min{}, max{};
+    for (int k = 0; k < 3; ++k) {
+        min[k] = max[k] = decoded.positions[0][k];
+    }
+    for (const auto& p : decoded.positions) {
+        for (int k = 0; k < 3; ++k) {
+            const double steps = p[k] / step;
+            if (steps != std::round(steps) || p[k] < double(snap.lo[k]) * step ||
+                p[k] > double(snap.hi[k]) * step) {
+                throw Error("tile " + tile_name(raster.id) + ": Draco decoded coordinate " +
+                            number(p[k]) + " off the " + number(step) +
+                            " m lattice; this is a bug, please report it with the tile");
+            }
+            min[k] = std::min(min[k], p[k]);
+            max[k] = std::max(max[k], p[k]);
+        }
+    }
+    if (format == Format::Drc) {
+        return draco_bytes;
+    }
+    const std::uint32_t normal_id = normal_att ? normal_att->unique_id() : 0;
+    const std::string json = glb_json(frame.translation,
+                                      min,
+                                      max,
+                                      n,
+                                      mesh.triangles.size(),
+                                      att->unique_id(),
+                                      normal_att ? &normal_id : nullptr,
+                                      draco_bytes.size());
+    return glb_container(json, draco_bytes);
+}
+
 ErrorBudget error_budget(double eps, double sag_share) {
     if (!std::isfinite(eps) || !(eps > 0)) {
         throw InputError("eps " + std::to_string(eps) + ": expected a finite number of metres > 0");
@@ -557,7 +736,9 @@ std::string encode_tile(const TileRaster& raster,
                         const ErrorBudget& budget,
                         const std::vector<CheckPoint>& points,
                         EncodeReport* report,
-                        const std::vector<std::array<double, 3>>* normals) {
+                        const std::vector<std::array<double, 3>>* normals,
+                        int threads,
+                        const NormalsFn& make_normals) {
     const std::size_t n = mesh.vertex_count();
     TB_ASSERT(normals == nullptr || normals->size() == n);
     TB_ASSERT(mesh.z.size() == n && mesh.y.size() == n && mesh.border.size() == n);
@@ -604,6 +785,23 @@ std::string encode_tile(const TileRaster& raster,
     // (a triangle steeper than kQuantMaxSlope next to a sample already near mesh_eps) they are
     // snapped to a finer lattice s/2^k, of which s is a sublattice, so borders still match.
     constexpr int kMaxRefine = 6;
+    const TileFrame frame{centre, enu, translation, z_min, z_max};
+    // With two threads the Draco encoding of the first lattice runs beside the check of the
+    // drawn surface, on the second thread, after the normals when they are made on demand:
+    // nearly every tile keeps that lattice, and a refined one is encoded again after its check.
+    // The published bound must be known before the check for a .drc (its eps_m), so a .drc
+    // with check points is encoded after them. The bytes are the same either way.
+    std::vector<std::array<double, 3>> made_normals;
+    const auto ensure_normals = [&]() -> const std::vector<std::array<double, 3>>* {
+        if (normals == nullptr && make_normals) {
+            made_normals = make_normals();
+            TB_ASSERT(made_normals.size() == n);
+            normals = &made_normals;
+        }
+        return normals;
+    };
+    const bool speculate = threads >= 2 && (format == Format::Glb || points.empty());
+    std::future<std::string> early;
     double step = s;
     std::vector<std::array<std::int64_t, 3>> q(n);
     std::vector<Ecef> world(n);
@@ -632,9 +830,31 @@ std::string encode_tile(const TileRaster& raster,
                 world[v] = enu_to_ecef(enu, local);
             }
         }
-        finish_lattice(q, step, raster, budget); // throws when the lattice is too fine for the tile
+        // Throws when the lattice is too fine for the tile.
+        Snapped lattice = finish_lattice(q, step, raster, budget);
+        if (speculate && refine == 0) {
+            early = std::async(std::launch::async, [&, lattice = std::move(lattice), step]() {
+                return draco_tile(raster,
+                                  mesh,
+                                  format,
+                                  budget,
+                                  frame,
+                                  lattice,
+                                  step,
+                                  budget.drawn_bound,
+                                  ensure_normals());
+            });
+        }
         grid_world = to_grid(raster, world);
-        const Verdict verdict = snapped_error(raster, mesh, grid_world);
+        const Verdict verdict =
+            snapped_error(raster, mesh, grid_world, early.valid() ? 1 : threads);
+        if (refine == 0 && early.valid() && !(verdict.max_error <= budget.eps)) {
+            try {
+                early.get(); // the lattice is refined: these bytes are not used
+            } catch (const std::exception&) {
+                // encoded again below, where a real failure throws
+            }
+        }
         if (verdict.max_error <= budget.eps) {
             if (refine > 0) {
                 log::debug("tile " + tile_name(raster.id) + ": interior lattice refined to " +
@@ -664,143 +884,11 @@ std::string encode_tile(const TileRaster& raster,
     if (report) {
         *report = measured;
     }
-
-    // The Draco mesh: lattice points as float32 (exact), triangles counter-clockwise seen from
-    // above as given.
-    draco::Mesh dm;
-    dm.set_num_points(static_cast<draco::PointIndex::ValueType>(n));
-    draco::GeometryAttribute ga;
-    ga.Init(draco::GeometryAttribute::POSITION,
-            nullptr,
-            3,
-            draco::DT_FLOAT32,
-            false,
-            sizeof(float) * 3,
-            0);
-    const int att_id = dm.AddAttribute(ga, true, static_cast<std::uint32_t>(n));
-    draco::PointAttribute* att = dm.attribute(att_id);
-    for (std::size_t v = 0; v < n; ++v) {
-        const float p[3] = {static_cast<float>(double(snap.q[v][0]) * step),
-                            static_cast<float>(double(snap.q[v][1]) * step),
-                            static_cast<float>(double(snap.q[v][2]) * step)};
-        att->SetAttributeValue(draco::AttributeValueIndex(static_cast<std::uint32_t>(v)), p);
+    if (early.valid()) {
+        return early.get(); // the first lattice held
     }
-    // Normals in the positions' axes: glb (x, z, -y) of ECEF, drc the ENU frame's axes.
-    draco::PointAttribute* normal_att = nullptr;
-    if (normals) {
-        draco::GeometryAttribute gn;
-        gn.Init(draco::GeometryAttribute::NORMAL,
-                nullptr,
-                3,
-                draco::DT_FLOAT32,
-                false,
-                sizeof(float) * 3,
-                0);
-        normal_att = dm.attribute(dm.AddAttribute(gn, true, static_cast<std::uint32_t>(n)));
-        for (std::size_t v = 0; v < n; ++v) {
-            const std::array<double, 3>& e = (*normals)[v];
-            std::array<double, 3> out{};
-            if (format == Format::Glb) {
-                out = {e[0], e[2], -e[1]};
-            } else {
-                for (int a = 0; a < 3; ++a) {
-                    out[a] = enu.axes[a][0] * e[0] + enu.axes[a][1] * e[1] + enu.axes[a][2] * e[2];
-                }
-            }
-            const float f[3] = {
-                static_cast<float>(out[0]), static_cast<float>(out[1]), static_cast<float>(out[2])};
-            normal_att->SetAttributeValue(draco::AttributeValueIndex(static_cast<std::uint32_t>(v)),
-                                          f);
-        }
-    }
-    for (std::size_t t = 0; t < mesh.triangle_count(); ++t) {
-        dm.AddFace({draco::PointIndex(mesh.triangles[3 * t]),
-                    draco::PointIndex(mesh.triangles[3 * t + 1]),
-                    draco::PointIndex(mesh.triangles[3 * t + 2])});
-    }
-    if (format == Format::Drc) {
-        auto md = std::make_unique<draco::GeometryMetadata>();
-        md->AddEntryString("schema", kDrcSchema);
-        md->AddEntryString("crs", "EPSG:4979");
-        md->AddEntryString("frame", "ENU");
-        md->AddEntryString("up_axis", "Z");
-        md->AddEntryString("scheme", to_string(raster.scheme));
-        md->AddEntryDouble("origin_lon_deg", centre.lon);
-        md->AddEntryDouble("origin_lat_deg", centre.lat);
-        md->AddEntryDouble("origin_h_m", centre.h);
-        md->AddEntryDouble("west_deg", raster.bounds.west);
-        md->AddEntryDouble("south_deg", raster.bounds.south);
-        md->AddEntryDouble("east_deg", raster.bounds.east);
-        md->AddEntryDouble("north_deg", raster.bounds.north);
-        md->AddEntryDouble("min_h_m", z_min);
-        md->AddEntryDouble("max_h_m", z_max);
-        md->AddEntryDouble("eps_m", measured.published);
-        md->AddEntryString("eps_meaning",
-                           "metres: every valid source DEM pixel centre under the tile is within "
-                           "eps_m, vertically, of the decoded surface");
-        md->AddEntryDouble("quant_step_m", step);
-        md->AddEntryDouble("quant_error_m", budget.quant_error);
-        md->AddEntryInt("level", raster.id.z);
-        md->AddEntryInt("x", static_cast<std::int32_t>(raster.id.x));
-        md->AddEntryInt("y", static_cast<std::int32_t>(raster.id.y));
-        dm.AddMetadata(std::move(md));
-    }
-
-    draco::Encoder encoder;
-    encoder.SetSpeedOptions(kDracoSpeed, kDracoSpeed);
-    encoder.SetEncodingMethod(draco::MESH_EDGEBREAKER_ENCODING);
-    const float origin[3] = {static_cast<float>(double(snap.origin[0]) * step),
-                             static_cast<float>(double(snap.origin[1]) * step),
-                             static_cast<float>(double(snap.origin[2]) * step)};
-    const float range = static_cast<float>(double((std::int64_t{1} << snap.bits) - 1) * step);
-    encoder.SetAttributeExplicitQuantization(
-        draco::GeometryAttribute::POSITION, snap.bits, 3, origin, range);
-    if (normals) {
-        encoder.SetAttributeQuantization(draco::GeometryAttribute::NORMAL, kNormalBits);
-    }
-    draco::EncoderBuffer buffer;
-    check(encoder.EncodeMeshToBuffer(dm, &buffer), "encoding", raster.id);
-    std::string draco_bytes(buffer.data(), buffer.size());
-
-    // Self-check on the decoded data (what clients see): counts kept, every coordinate on the
-    // lattice point it was snapped to; glTF min/max are taken from it.
-    const DecodedTile decoded = decode_drc(draco_bytes);
-    if (decoded.positions.size() != n || decoded.indices.size() != mesh.triangles.size() ||
-        decoded.normals.size() != (normals ? n : 0)) {
-        throw Error("tile " + tile_name(raster.id) + ": Draco changed the mesh (" +
-                    std::to_string(n) + " vertices -> " + std::to_string(decoded.positions.size()) +
-                    "); this is a bug, please report it with the tile");
-    }
-    std::array<double, 3> min{}, max{};
-    for (int k = 0; k < 3; ++k) {
-        min[k] = max[k] = decoded.positions[0][k];
-    }
-    for (const auto& p : decoded.positions) {
-        for (int k = 0; k < 3; ++k) {
-            const double steps = p[k] / step;
-            if (steps != std::round(steps) || p[k] < double(snap.lo[k]) * step ||
-                p[k] > double(snap.hi[k]) * step) {
-                throw Error("tile " + tile_name(raster.id) + ": Draco decoded coordinate " +
-                            number(p[k]) + " off the " + number(step) +
-                            " m lattice; this is a bug, please report it with the tile");
-            }
-            min[k] = std::min(min[k], p[k]);
-            max[k] = std::max(max[k], p[k]);
-        }
-    }
-    if (format == Format::Drc) {
-        return draco_bytes;
-    }
-    const std::uint32_t normal_id = normal_att ? normal_att->unique_id() : 0;
-    const std::string json = glb_json(translation,
-                                      min,
-                                      max,
-                                      n,
-                                      mesh.triangles.size(),
-                                      att->unique_id(),
-                                      normal_att ? &normal_id : nullptr,
-                                      draco_bytes.size());
-    return glb_container(json, draco_bytes);
+    return draco_tile(
+        raster, mesh, format, budget, frame, snap, step, measured.published, ensure_normals());
 }
 
 } // namespace tb::tiler

@@ -130,13 +130,20 @@ struct EncodeReport {
 // 10 bits keep a decoded normal within about 0.25 degrees of the given one (shading cannot show
 // that) for about 1.6 bytes per vertex (12 bits: 2.1 bytes; glb of N44W072.hgt, tile 9/308/382).
 inline constexpr int kNormalBits = 10;
+// Normals made on demand: encode_tile calls it (when no `normals` are given) once, on its second
+// thread beside the check of the drawn surface when it has two.
+using NormalsFn = std::function<std::vector<std::array<double, 3>>()>;
+// `threads` (>= 1) caps the threads encode_tile uses, the calling one included: with two, the
+// Draco encoding runs beside the check of the drawn surface. The bytes are the same for any value.
 std::string encode_tile(const TileRaster& raster,
                         const TileMesh& mesh,
                         Format format,
                         const ErrorBudget& budget,
                         const std::vector<CheckPoint>& points = {},
                         EncodeReport* report = nullptr,
-                        const std::vector<std::array<double, 3>>* normals = nullptr);
+                        const std::vector<std::array<double, 3>>* normals = nullptr,
+                        int threads = 1,
+                        const NormalsFn& make_normals = {});
 // The core mesh of raster's own lattice (every triangle kept), as to_tile_mesh gives it.
 std::string encode_tile(const TileRaster& raster,
                         const core::Mesh& mesh,
