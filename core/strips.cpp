@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <exception>
 #include <future>
+#include <memory>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -126,7 +127,8 @@ Mesh stitch(const std::vector<Mesh>& meshes, const std::vector<int>& cut, int he
 Mesh triangulate_strips(const HeightGrid& grid,
                         const TriangulateOptions& options,
                         int strips,
-                        int threads) {
+                        int threads,
+                        const RunElsewhere& run_elsewhere) {
     check_input(grid, options);
     strips = std::min(strips, (grid.width - 1) / (kMinStripColumns - 1));
     if (strips <= 1 || !options.lock_border) {
@@ -155,10 +157,29 @@ Mesh triangulate_strips(const HeightGrid& grid,
     };
     std::vector<std::future<std::vector<Mesh>>> others;
     for (std::size_t l = 1; l < lanes; ++l) {
-        others.push_back(std::async(std::launch::async, lane, l));
+        if (run_elsewhere) {
+            auto task = std::make_shared<std::packaged_task<std::vector<Mesh>()>>(
+                [&lane, l] { return lane(l); });
+            others.push_back(task->get_future());
+            run_elsewhere([task] { (*task)(); });
+        } else {
+            others.push_back(std::async(std::launch::async, lane, l));
+        }
     }
+    // Every lane has finished before this returns or throws: they read parts.
+    const auto wait_all = [&others] {
+        for (auto& f : others) {
+            f.wait();
+        }
+    };
     std::vector<std::vector<Mesh>> by_lane;
-    by_lane.push_back(lane(0));
+    try {
+        by_lane.push_back(lane(0));
+    } catch (...) {
+        wait_all();
+        throw;
+    }
+    wait_all();
     for (auto& f : others) {
         by_lane.push_back(f.get());
     }

@@ -1,5 +1,7 @@
 #pragma once
 // The single entry point of the mesher: Lu & Yun's L-infinity split-merge triangulation.
+#include <functional>
+
 #include "core/mesh.hpp"
 
 namespace tb::core {
@@ -38,11 +40,15 @@ void check_input(const HeightGrid& grid, const TriangulateOptions& options);
 // timing. Meshes the grid whole when options.lock_border is off (the cuts must be locked) or
 // when strips of at least kMinStripColumns columns do not fit. `threads` (>= 1) caps the threads
 // used, the calling one included (1: the strips one after the other, on this thread); 0 gives
-// each strip its own. The mesh is the same for any value.
+// each strip its own. The mesh is the same for any value. The other threads' strips go to
+// `run_elsewhere` when given (it must run each job it gets, once, on some other thread: the
+// caller's long-lived helpers), else each to a thread of its own (std::async).
+using RunElsewhere = std::function<void(std::function<void()>)>;
 Mesh triangulate_strips(const HeightGrid& grid,
                         const TriangulateOptions& options,
                         int strips,
-                        int threads = 0);
+                        int threads = 0,
+                        const RunElsewhere& run_elsewhere = {});
 
 inline constexpr int kMinStripColumns = 33;
 

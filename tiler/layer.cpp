@@ -8,6 +8,7 @@
 #include "tiler/formats/quantized_mesh.hpp"
 #include "tiler/formats/terrain_tiles.hpp"
 #include "tiler/geodesy.hpp"
+#include "tiler/helper_threads.hpp"
 #include "tiler/log.hpp"
 #include "tiler/mesh/pixel_tile.hpp"
 #include "tiler/sources/gdal_source.hpp"
@@ -1049,7 +1050,8 @@ core::Mesh mesh_tile(const TileRaster& raster, const ErrorBudget& budget, int th
         raster.grid,
         core::TriangulateOptions{budget.mesh_eps, true, budget.max_edge},
         kStrips,
-        threads);
+        threads,
+        run_on_helper);
 }
 
 std::string mesh_to_obj(const core::Mesh& mesh) {

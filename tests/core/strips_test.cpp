@@ -5,9 +5,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <span>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "core/breakpoints.hpp"
@@ -98,6 +100,19 @@ TEST_CASE("the strips' mesh is the same on one thread, two, or one per strip (se
                 CHECK(m.points == all.points);
                 CHECK(m.triangles == all.triangles);
             }
+            // The other lanes handed to the caller's runner (here a thread per job, joined
+            // after): the same mesh, and every job ran.
+            std::vector<std::thread> jobs;
+            const Mesh elsewhere =
+                tb::core::triangulate_strips(g, opt, strips, 2, [&jobs](std::function<void()> job) {
+                    jobs.emplace_back(std::move(job));
+                });
+            CHECK(jobs.size() == 1);
+            for (std::thread& t : jobs) {
+                t.join();
+            }
+            CHECK(elsewhere.points == all.points);
+            CHECK(elsewhere.triangles == all.triangles);
         }
     }
 }

@@ -12,6 +12,7 @@
 #include "tiler/formats/draco_decode.hpp"
 #include "tiler/formats/encode.hpp"
 #include "tiler/geodesy.hpp"
+#include "tiler/helper_threads.hpp"
 #include "tiler/json_number.hpp"
 #include "tiler/log.hpp"
 
@@ -27,7 +28,6 @@
 #include <charconv>
 #include <cmath>
 #include <cstring>
-#include <future>
 #include <limits>
 #include <memory>
 
@@ -249,7 +249,7 @@ snapped_error(const TileRaster& raster, const TileMesh& mesh, const GridVertices
     // Two row halves on two threads for a tile worth it (a cold tile in the server).
     if (threads >= 2 && height >= kMinRowsToSplit) {
         const int mid = height / 2;
-        auto lower = std::async(std::launch::async, pass1, mid, height - 1);
+        Beside<void> lower = beside([&pass1, mid, height] { pass1(mid, height - 1); });
         pass1(0, mid - 1);
         lower.get();
     } else {
@@ -801,7 +801,7 @@ std::string encode_tile(const TileRaster& raster,
         return normals;
     };
     const bool speculate = threads >= 2 && (format == Format::Glb || points.empty());
-    std::future<std::string> early;
+    Beside<std::string> early;
     double step = s;
     std::vector<std::array<std::int64_t, 3>> q(n);
     std::vector<Ecef> world(n);
@@ -833,7 +833,7 @@ std::string encode_tile(const TileRaster& raster,
         // Throws when the lattice is too fine for the tile.
         Snapped lattice = finish_lattice(q, step, raster, budget);
         if (speculate && refine == 0) {
-            early = std::async(std::launch::async, [&, lattice = std::move(lattice), step]() {
+            early = beside([&, lattice = std::move(lattice), step]() {
                 return draco_tile(raster,
                                   mesh,
                                   format,

@@ -5,6 +5,7 @@
 #include "core/breakpoints.hpp"
 #include "core/error.hpp"
 #include "core/triangulate.hpp"
+#include "tiler/helper_threads.hpp"
 #include "tiler/sources/geoid.hpp"
 
 #include <algorithm>
@@ -371,8 +372,12 @@ mesh_pixel_tile(const PixelTile& t, const ErrorBudget& budget, bool drop_voids, 
     // The block: core's mesh, or for a block one pixel thin the optimal fit of its one line.
     std::vector<int> inner[4]; // positions along each side of the block, increasing
     if (w >= 2 && h >= 2) {
-        const core::Mesh mesh = core::triangulate_strips(
-            grid, core::TriangulateOptions{budget.mesh_eps, true, core_edge}, 2, threads);
+        const core::Mesh mesh =
+            core::triangulate_strips(grid,
+                                     core::TriangulateOptions{budget.mesh_eps, true, core_edge},
+                                     2,
+                                     threads,
+                                     run_on_helper);
         std::vector<core::Index> id(mesh.points.size());
         for (std::size_t v = 0; v < mesh.points.size(); ++v) {
             const core::GridPoint p = mesh.points[v];
