@@ -1,10 +1,15 @@
 #include "tiler/helper_threads.hpp"
 
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <cerrno>
 #include <chrono>
 #include <condition_variable>
 #include <cstddef>
 #include <deque>
 #include <mutex>
+#include <optional>
 #include <system_error>
 #include <thread>
 
@@ -72,10 +77,30 @@ private:
     std::size_t threads_ = 0; // helpers alive
 };
 
+// The calling thread's nice value (Linux keeps one per thread), or nullopt.
+std::optional<int> own_nice() {
+    errno = 0;
+    const int nice = getpriority(PRIO_PROCESS, static_cast<id_t>(gettid()));
+    if (nice == -1 && errno != 0) {
+        return std::nullopt;
+    }
+    return nice;
+}
+
 } // namespace
 
 void run_on_helper(std::function<void()> job) {
-    Helpers::get().run(std::move(job));
+    // The job runs at its submitter's nice value: the server's generation threads yield to the
+    // threads that answer requests, and the half of a tile that runs on a helper must too.
+    const std::optional<int> nice = own_nice();
+    Helpers::get().run([nice, job = std::move(job)] {
+        if (nice && own_nice() != nice) {
+            // Raising a thread's priority back may be refused (no CAP_SYS_NICE): it then runs
+            // at the lower one it has.
+            setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), *nice);
+        }
+        job();
+    });
 }
 
 } // namespace tb::tiler

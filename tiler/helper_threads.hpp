@@ -10,8 +10,8 @@
 //
 // A task never waits for another task: when no helper is idle, a new one starts, so tasks that
 // block on each other cannot deadlock. Helpers idle for a minute exit, except the first few. A
-// helper takes the nice value of the thread that started it (the server's generation threads
-// run at a lower priority, and their helpers with them).
+// job runs at the nice value of the thread that handed it over (the server's generation threads
+// run at a lower priority, and the halves of their tiles on helpers with them).
 #include <functional>
 #include <future>
 #include <memory>

@@ -12,6 +12,9 @@
 
 #include "tiler/helper_threads.hpp"
 
+#include <sys/resource.h>
+#include <unistd.h>
+
 using namespace tb::tiler;
 
 TEST_CASE("beside runs a task on another thread and hands back its result or its exception") {
@@ -68,4 +71,15 @@ TEST_CASE("an unread result waits for its task when it goes away, so the task's 
     slot = beside([] {});
     CHECK(first.load());
     slot.get();
+}
+
+TEST_CASE("a job runs at the nice value of the thread that handed it over") {
+    // From a thread at nice 15 (lowering one's own priority is always allowed).
+    int seen = 0;
+    std::thread low([&seen] {
+        REQUIRE(setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), 15) == 0);
+        seen = beside([] { return getpriority(PRIO_PROCESS, static_cast<id_t>(gettid())); }).get();
+    });
+    low.join();
+    CHECK(seen == 15);
 }
