@@ -806,6 +806,7 @@ std::string encode_tile(const TileRaster& raster,
     std::vector<std::array<std::int64_t, 3>> q(n);
     std::vector<Ecef> world(n);
     GridVertices grid_world;
+    Snapped snap; // the lattice of the last round: the one kept
     for (int refine = 0;; ++refine) {
         step = std::ldexp(s, -refine);
         for (std::size_t v = 0; v < n; ++v) {
@@ -831,9 +832,9 @@ std::string encode_tile(const TileRaster& raster,
             }
         }
         // Throws when the lattice is too fine for the tile.
-        Snapped lattice = finish_lattice(q, step, raster, budget);
+        snap = finish_lattice(q, step, raster, budget);
         if (speculate && refine == 0) {
-            early = beside([&, lattice = std::move(lattice), step]() {
+            early = beside([&, lattice = snap, step]() {
                 return draco_tile(raster,
                                   mesh,
                                   format,
@@ -848,7 +849,7 @@ std::string encode_tile(const TileRaster& raster,
         grid_world = to_grid(raster, world);
         const Verdict verdict =
             snapped_error(raster, mesh, grid_world, early.valid() ? 1 : threads);
-        if (refine == 0 && early.valid() && !(verdict.max_error <= budget.eps)) {
+        if (early.valid() && !(verdict.max_error <= budget.eps)) {
             try {
                 early.get(); // the lattice is refined: these bytes are not used
             } catch (const std::exception&) {
@@ -872,7 +873,6 @@ std::string encode_tile(const TileRaster& raster,
                         "please report it with the tile");
         }
     }
-    const Snapped snap = finish_lattice(q, step, raster, budget);
     EncodeReport measured = points_error(mesh, grid_world, points);
     measured.published = budget.drawn_bound;
     if (!points.empty()) {
