@@ -328,7 +328,11 @@ std::size_t Refiner::merge_pass() {
         const std::int64_t points = error_points.empty() ? 0 : error_points[v];
         order.push_back({static_cast<std::uint64_t>(points), z_order_key(p), v});
     }
-    std::sort(order.begin(), order.end());
+    // After compact() the vertices are numbered along the Z-order curve, and a clean mesh's
+    // merge passes add none: the list is then already in order, and checking costs one pass.
+    if (!std::is_sorted(order.begin(), order.end())) {
+        std::sort(order.begin(), order.end());
+    }
     std::vector<Index> ring;
     std::size_t removed = 0;
     for (const Candidate& c : order) {
