@@ -389,6 +389,57 @@ TEST_CASE("nodata and NaN samples are voids, and samples outside the raster too"
     }
 }
 
+TEST_CASE("read_pixels gives each pixel's height, NaN for nodata and off the raster, any window") {
+    ScratchDir dir;
+    const int w = 13, h = 9;
+    std::vector<double> values(static_cast<std::size_t>(w) * h);
+    for (int j = 0; j < h; ++j) {
+        for (int i = 0; i < w; ++i) {
+            values[static_cast<std::size_t>(j) * w + i] = 100.0 * j + i + 0.25;
+        }
+    }
+    values[3 * w + 4] = -9999;
+    Fixture f = geographic(w, h, 10.0, 45.0, values);
+    f.nodata = -9999;
+    f.scale = 2.0; // heights are 2 * raw + 1
+    f.offset = 1.0;
+    const auto source = DemSource::open({tb_test::write_fixture(dir.file("window.tif"), f)});
+    const auto expected = [&](std::int64_t i, std::int64_t j) -> double {
+        if (i < 0 || j < 0 || i >= w || j >= h || (i == 4 && j == 3)) {
+            return NAN;
+        }
+        return 2.0 * values[static_cast<std::size_t>(j) * w + i] + 1.0;
+    };
+    // Inside; over each side and corner; larger than the raster; wholly off it.
+    const std::array<std::array<std::int64_t, 4>, 9> windows{{{2, 1, 5, 4},
+                                                              {-3, 2, 6, 3},
+                                                              {9, 2, 7, 3},
+                                                              {1, -2, 4, 5},
+                                                              {1, 6, 4, 6},
+                                                              {-2, -2, 5, 5},
+                                                              {10, 7, 6, 5},
+                                                              {-4, -3, 21, 15},
+                                                              {20, 0, 3, 3}}};
+    for (const auto& [c0, r0, ww, wh] : windows) {
+        CAPTURE(c0);
+        CAPTURE(r0);
+        const std::vector<double> got =
+            source->read_pixels(c0, r0, static_cast<int>(ww), static_cast<int>(wh));
+        REQUIRE(got.size() == static_cast<std::size_t>(ww * wh));
+        for (std::int64_t j = 0; j < wh; ++j) {
+            for (std::int64_t i = 0; i < ww; ++i) {
+                const double want = expected(c0 + i, r0 + j);
+                const double v = got[static_cast<std::size_t>(j * ww + i)];
+                if (std::isnan(want)) {
+                    CHECK(std::isnan(v));
+                } else {
+                    CHECK(v == want);
+                }
+            }
+        }
+    }
+}
+
 TEST_CASE("complex and colour rasters are rejected with a clear error") {
     ScratchDir dir;
     Fixture complex_fixture = geographic(4, 4, 0, 1, {});

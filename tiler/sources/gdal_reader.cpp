@@ -519,7 +519,11 @@ GdalDemSource::read_pixels(std::int64_t column0, std::int64_t row0, int width, i
         return out;
     }
     const int ww = static_cast<int>(c1 - c0), wh = static_cast<int>(r1 - r0);
-    std::vector<double> window(static_cast<std::size_t>(ww) * wh);
+    // The part inside the raster is read straight into its place in the result (GDAL's line
+    // spacing skips the rest of each row) and converted there: a second buffer of a coarse
+    // tile's size would cost more in first-touch page faults than the reading.
+    double* const first = out.data() + static_cast<std::size_t>(r0 - row0) * width + (c0 - column0);
+    const auto row_bytes = static_cast<GSpacing>(sizeof(double)) * width;
     Lease h = acquire();
     CPLErrorReset();
     if (h->ds->GetRasterBand(1)->RasterIO(GF_Read,
@@ -527,19 +531,19 @@ GdalDemSource::read_pixels(std::int64_t column0, std::int64_t row0, int width, i
                                           static_cast<int>(r0),
                                           ww,
                                           wh,
-                                          window.data(),
+                                          first,
                                           ww,
                                           wh,
                                           GDT_Float64,
-                                          0,
-                                          0,
+                                          sizeof(double),
+                                          row_bytes,
                                           nullptr) != CE_None) {
         throw IoError(info_.path + ": read failed (" + gdal_message() + ")");
     }
     for (int j = 0; j < wh; ++j) {
+        double* const row = first + static_cast<std::size_t>(j) * width;
         for (int i = 0; i < ww; ++i) {
-            out[static_cast<std::size_t>(r0 - row0 + j) * width + (c0 - column0 + i)] =
-                to_height(window[static_cast<std::size_t>(j) * ww + i]);
+            row[i] = to_height(row[i]);
         }
     }
     return out;
