@@ -112,7 +112,9 @@ bool Refiner::try_remove(Index v, std::vector<Index>& ring) {
         };
         // orient2d(b, c, pv), orient2d(c, a, pv) = -orient2d(a, c, pv), orient2d(a, b, pv).
         const std::int64_t wa = at(j, k), wb = -at(i, k), wc = at(i, j);
-        covers = wa >= 0 && wb >= 0 && wc >= 0 && orient2d(a, b, c) > 0;
+        // The three sum to orient2d(a, b, c) exactly, wherever pv lies.
+        const std::int64_t area = wa + wb + wc;
+        covers = wa >= 0 && wb >= 0 && wc >= 0 && area > 0;
         if (!covers) {
             return true;
         }
@@ -125,7 +127,7 @@ bool Refiner::try_remove(Index v, std::vector<Index>& ring) {
                                      wa,
                                      wb,
                                      wc,
-                                     inverse_area(a, b, c),
+                                     1.0 / static_cast<double>(area), // inverse_area(a, b, c)
                                      pv);
         return std::abs(z - zv) <= eps_;
     };
@@ -188,9 +190,11 @@ bool Refiner::try_remove(Index v, std::vector<Index>& ring) {
     };
     // Every re-triangulation has a triangle covering v. Those candidates are tried first, so
     // that a removal that cannot work usually fails after a few scans instead of all of them.
+    // The sides found valid or not here are the dynamic program's too (the same test).
+    auto& side = scratch_.dp.side;
+    side.assign(n * n, -1);
+    scratch_.dp.side_ready = true;
     if (v_counts) {
-        auto& side = scratch_.side;
-        side.assign(n * n, -1);
         const auto side_ok = [&](int i, int k) {
             std::int8_t& known =
                 side[static_cast<std::size_t>(i) * n + static_cast<std::size_t>(k)];
@@ -200,10 +204,23 @@ bool Refiner::try_remove(Index v, std::vector<Index>& ring) {
             }
             return known == 1;
         };
+        // In the same order as every (i < j < k), but the signs of toward_v rule out most of
+        // the triangles not covering v before honours_v looks at them: (i, j, k) covers v only
+        // when orient2d(pts[i], pts[j], pv) >= 0, orient2d(pts[j], pts[k], pv) >= 0 and
+        // orient2d(pts[i], pts[k], pv) <= 0.
+        const auto w = [&](int r, int q) {
+            return toward_v[static_cast<std::size_t>(r) * n + static_cast<std::size_t>(q)];
+        };
         bool any = false;
         for (int i = 0; i < static_cast<int>(n) && !any; ++i) {
             for (int j = i + 1; j < static_cast<int>(n) && !any; ++j) {
+                if (w(i, j) < 0) {
+                    continue;
+                }
                 for (int k = j + 1; k < static_cast<int>(n) && !any; ++k) {
+                    if (w(j, k) < 0 || w(i, k) > 0) {
+                        continue;
+                    }
                     bool covers = false;
                     if (honours_v(i, j, k, covers) && covers && side_ok(i, j) && side_ok(j, k) &&
                         side_ok(i, k)) {
@@ -255,7 +272,8 @@ bool Refiner::try_remove(Index v, std::vector<Index>& ring) {
         break;
     }
     // Outer twins of the hole's edges: poly[k] -> poly[k + 1] is the far edge of ring[k].
-    std::vector<Index> outer(n, kNone);
+    auto& outer = scratch_.outer;
+    outer.assign(n, kNone);
     for (std::size_t k = 0; k < ring.size(); ++k) {
         outer[k] = tin_.halfedges[next_edge(ring[k])];
     }
@@ -263,19 +281,25 @@ bool Refiner::try_remove(Index v, std::vector<Index>& ring) {
         release(e / 3);
     }
     tin_.vertex_edge[v] = kNone;
-    std::vector<Index> made;
+    // A diagonal poly[from] -> poly[to] waits in `diagonal` until its twin poly[to] -> poly[from]
+    // comes with a later triangle.
+    auto& diagonal = scratch_.diagonal;
+    diagonal.assign(n * n, kNone);
     for (const auto& [i, j, k] : *tris) {
         const Index t = tin_.add_triangle(poly[static_cast<std::size_t>(i)],
                                           poly[static_cast<std::size_t>(j)],
                                           poly[static_cast<std::size_t>(k)]);
-        made.push_back(t);
         const std::array<int, 3> corner{i, j, k};
         for (int s = 0; s < 3; ++s) {
-            const int from = corner[static_cast<std::size_t>(s)];
-            const int to = corner[static_cast<std::size_t>((s + 1) % 3)];
+            const auto from = static_cast<std::size_t>(corner[static_cast<std::size_t>(s)]);
+            const auto to = static_cast<std::size_t>(corner[static_cast<std::size_t>((s + 1) % 3)]);
             const Index e = 3 * t + static_cast<Index>(s);
-            if ((from + 1) % static_cast<int>(n) == to) {
-                tin_.link(e, outer[static_cast<std::size_t>(from)]);
+            if ((from + 1) % n == to) {
+                tin_.link(e, outer[from]);
+            } else if (diagonal[to * n + from] != kNone) {
+                tin_.link(e, diagonal[to * n + from]);
+            } else {
+                diagonal[from * n + to] = e;
             }
         }
         const std::size_t id = key(i, j, k);
@@ -283,19 +307,6 @@ bool Refiner::try_remove(Index v, std::vector<Index>& ring) {
             std::find_if(exact.begin(), exact.end(), [&](const auto& m) { return m.first == id; });
         TB_ASSERT(it != exact.end());
         set_stats(t, it->second);
-    }
-    // Link the diagonals between the new triangles.
-    for (Index t : made) {
-        for (Index e = 3 * t; e < 3 * t + 3; ++e) {
-            const Index a = tin_.triangles[e], b = tin_.triangles[next_edge(e)];
-            for (Index u : made) {
-                for (Index f = 3 * u; f < 3 * u + 3; ++f) {
-                    if (tin_.triangles[f] == b && tin_.triangles[next_edge(f)] == a) {
-                        tin_.link(e, f);
-                    }
-                }
-            }
-        }
     }
     return true;
 }

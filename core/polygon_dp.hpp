@@ -39,7 +39,12 @@ bool valid_diagonal_star(std::span<const GridPoint> v, GridPoint center, int i, 
 
 // Working memory of triangulate_polygon, reusable across calls to save allocations.
 struct PolygonDpScratch {
-    std::vector<std::uint8_t> side;
+    // side[i * n + k], i < k: 1 when v_i v_k may be a side of a sub-polygon (a polygon edge or
+    // a valid diagonal), 0 when not, -1 while unknown; filled as the program needs it. A
+    // caller that has filled some entries itself for this polygon (n * n entries, the rest -1)
+    // sets side_ready, and the program keeps them.
+    std::vector<std::int8_t> side;
+    bool side_ready = false;
     std::vector<std::optional<TriangleCost>> best;
     std::vector<int> apex;
 };
@@ -47,10 +52,10 @@ struct PolygonDpScratch {
 // Minimum-cost triangulation of the simple counter-clockwise polygon v (n >= 3), where
 // cost(i, j, k) for i < j < k is the cost of the triangle (v[i], v[j], v[k]) or nullopt when
 // that triangle may not be used (any callable (int, int, int) -> std::optional<TriangleCost>).
-// Only valid diagonals are used and every triangle has positive area. Returns the triangles as index triples (counter-clockwise), or nullopt when no allowed
-// triangulation exists. Ties go to the lowest apex index. O(n^3) cost calls at most (each
-// triple once). With star_center the polygon must be star-shaped around it as
-// valid_diagonal_star requires, and that faster test is used.
+// Only valid diagonals are used and every triangle has positive area. Returns the triangles as
+// index triples (counter-clockwise), or nullopt when no allowed triangulation exists. Ties go to
+// the lowest apex index. O(n^3) cost calls at most (each triple once). With star_center the polygon
+// must be star-shaped around it as valid_diagonal_star requires, and that faster test is used.
 template <typename Cost>
 std::optional<std::vector<std::array<int, 3>>>
 triangulate_polygon(std::span<const GridPoint> v,
@@ -62,30 +67,35 @@ triangulate_polygon(std::span<const GridPoint> v,
 // ---- implementation (a template: the cost is inlined into the program's inner loop) ----
 
 template <typename Cost>
-std::optional<std::vector<std::array<int, 3>>>
-triangulate_polygon(std::span<const GridPoint> v,
-                    const Cost& cost,
-                    TriangleCost* total,
-                    PolygonDpScratch* scratch,
-                    const GridPoint* star_center) {
+std::optional<std::vector<std::array<int, 3>>> triangulate_polygon(std::span<const GridPoint> v,
+                                                                   const Cost& cost,
+                                                                   TriangleCost* total,
+                                                                   PolygonDpScratch* scratch,
+                                                                   const GridPoint* star_center) {
     const int n = static_cast<int>(v.size());
     if (n < 3) {
         return std::nullopt;
     }
     const auto idx = [n](int i, int k) { return static_cast<std::size_t>(i * n + k); };
-    // side[i][k]: v_i v_k may be a side of a sub-polygon (a polygon edge or a valid diagonal).
     PolygonDpScratch local;
     PolygonDpScratch& mem = scratch != nullptr ? *scratch : local;
     auto& side = mem.side;
-    side.assign(static_cast<std::size_t>(n * n), 0);
-    for (int i = 0; i < n; ++i) {
-        for (int k = i + 1; k < n; ++k) {
-            const bool edge = k == i + 1 || (i == 0 && k == n - 1);
-            const bool inside = star_center != nullptr ? valid_diagonal_star(v, *star_center, i, k)
-                                                       : valid_diagonal(v, i, k);
-            side[idx(i, k)] = edge || inside ? 1 : 0;
-        }
+    if (!mem.side_ready) {
+        side.assign(static_cast<std::size_t>(n * n), -1);
     }
+    // Tested only for the pairs (i, k) that some apex j could close: most diagonals of a hole
+    // that cannot be triangulated never are.
+    const auto side_ok = [&](int i, int k) {
+        std::int8_t& known = side[idx(i, k)];
+        if (known < 0) {
+            const bool edge = k == i + 1 || (i == 0 && k == n - 1);
+            known = edge || (star_center != nullptr ? valid_diagonal_star(v, *star_center, i, k)
+                                                    : valid_diagonal(v, i, k))
+                        ? 1
+                        : 0;
+        }
+        return known == 1;
+    };
     auto& best = mem.best;
     best.assign(static_cast<std::size_t>(n * n), std::nullopt);
     auto& apex = mem.apex;
@@ -96,14 +106,14 @@ triangulate_polygon(std::span<const GridPoint> v,
     for (int len = 2; len < n; ++len) {
         for (int i = 0; i + len < n; ++i) {
             const int k = i + len;
-            if (!side[idx(i, k)]) {
-                continue;
-            }
             for (int j = i + 1; j < k; ++j) {
                 const auto& left = best[idx(i, j)];
                 const auto& right = best[idx(j, k)];
                 if (!left || !right) {
                     continue;
+                }
+                if (!side_ok(i, k)) {
+                    break;
                 }
                 if (orient2d(v[static_cast<std::size_t>(i)],
                              v[static_cast<std::size_t>(j)],

@@ -52,7 +52,10 @@ private:
     bool try_remove(Index v, std::vector<Index>& ring);
     // Squared length of t's longest edge and that edge (first of equals).
     std::int64_t longest_edge2(Index t, Index& edge) const;
-    bool too_long(GridPoint a, GridPoint b) const;
+    bool too_long(GridPoint a, GridPoint b) const { // inline: the merge agent asks per triangle
+        const std::int64_t dx = b.x - a.x, dy = b.y - a.y;
+        return dx * dx + dy * dy > max_edge2_floor_;
+    }
     // Removes the over-long edge e (the globally longest edge): see split_until_clean.
     void shorten(Index e, std::vector<Index>& stack);
     void insert_at(Index t, GridPoint q, std::vector<Index>& stack);
@@ -78,8 +81,9 @@ private:
         std::vector<std::uint8_t> state;
         std::vector<TriangleCost> estimate;
         std::vector<std::pair<std::size_t, TriangleStats>> exact;
-        std::vector<std::int8_t> side;
         std::vector<std::int64_t> toward_v;
+        std::vector<Index> outer;
+        std::vector<Index> diagonal;
         PolygonDpScratch dp;
     } scratch_;
 };

@@ -166,19 +166,21 @@ void Refiner::swap_around(Index p, std::vector<Index>& stack) {
 }
 
 std::int64_t Refiner::longest_edge2(Index t, Index& edge) const {
-    std::int64_t best = -1;
-    for (Index e = 3 * t; e < 3 * t + 3; ++e) {
-        const std::int64_t l2 = length2(tin_.start(e), tin_.points[tin_.triangles[next_edge(e)]]);
-        if (l2 > best) {
-            best = l2;
-            edge = e;
-        }
+    const GridPoint a = tin_.points[tin_.triangles[3 * t]];
+    const GridPoint b = tin_.points[tin_.triangles[3 * t + 1]];
+    const GridPoint c = tin_.points[tin_.triangles[3 * t + 2]];
+    const std::int64_t ab = length2(a, b), bc = length2(b, c), ca = length2(c, a);
+    // The first of equals, in half-edge order a -> b, b -> c, c -> a.
+    if (ab >= bc && ab >= ca) {
+        edge = 3 * t;
+        return ab;
     }
-    return best;
-}
-
-bool Refiner::too_long(GridPoint a, GridPoint b) const {
-    return length2(a, b) > max_edge2_floor_;
+    if (bc >= ca) {
+        edge = 3 * t + 1;
+        return bc;
+    }
+    edge = 3 * t + 2;
+    return ca;
 }
 
 void Refiner::insert_at(Index t, GridPoint q, std::vector<Index>& stack) {
