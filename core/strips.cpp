@@ -188,8 +188,9 @@ Mesh triangulate_strips(const HeightGrid& grid,
         meshes.push_back(std::move(by_lane[k % lanes][k / lanes]));
     }
     Mesh mesh = stitch(meshes, cut, grid.height);
-    // Each strip passed triangulate()'s exact check over all its samples, and stitching moves
-    // no vertex: what remains to prove is that the pieces tile the rectangle as one mesh.
+    // Each strip passed triangulate()'s checks (its error at every sample, unless
+    // options.check_error is off), and stitching moves no vertex: what remains to prove is that
+    // the pieces tile the rectangle as one mesh.
     check_mesh(mesh, grid.width, grid.height);
     return mesh;
 }

@@ -89,10 +89,12 @@ Mesh triangulate(const HeightGrid& grid, const TriangulateOptions& options) {
     Mesh mesh = refiner.tin().to_mesh(grid.heights, grid.width);
     // The guarantee, checked in every build: O(triangles + samples), a few percent of the run.
     check_mesh(mesh, grid.width, grid.height);
-    const double err = max_error(mesh, grid);
-    if (!(err <= eps)) {
-        throw Error("triangulate: internal error: mesh misses a sample by " + number(err) +
-                    " > eps " + number(eps));
+    if (options.check_error) {
+        const double err = max_error(mesh, grid);
+        if (!(err <= eps)) {
+            throw Error("triangulate: internal error: mesh misses a sample by " + number(err) +
+                        " > eps " + number(eps));
+        }
     }
     if (options.max_edge > 0.0) {
         const double longest = longest_edge(mesh);

@@ -231,7 +231,7 @@ public:
                                  " tiles are DEM tiles (make_dem_tile)");
             }
         }
-        // Each mesh once: glb and drc share mesh_tile_at's, terrain and terrain3d a draft. The
+        // Each mesh once: glb and drc share mesh_to_encode's, terrain and terrain3d a draft. The
         // first is dropped before the second is made, so only one is held at a time.
         std::vector<std::optional<std::string>> made(formats.size());
         {
@@ -244,7 +244,7 @@ public:
                 if (!meshed) {
                     try {
                         check_id(id); // before eps_for_zoom: its message names the id
-                        meshed = mesh_tile_at(id, eps_for_zoom(id.z));
+                        meshed = mesh_to_encode(id, eps_for_zoom(id.z));
                     } catch (const NotFound&) {
                         break; // no data here: no glb, no drc
                     }
@@ -299,7 +299,7 @@ public:
     // make_tile_at; without `with_normals` the tile carries no normals (tile_error only
     // measures, and the normals would cost another read of the source).
     std::string encode_at(const TileId& id, Format format, double eps, bool with_normals) const {
-        const MeshedTile t = mesh_tile_at(id, eps);
+        const MeshedTile t = mesh_to_encode(id, eps);
         // Shading normals, the same function of position as the terrain tiles' (encode_tile
         // neither adds nor reorders vertices, so they stay aligned with the mesh), made by
         // encode_tile when it needs them: beside its check, when it has two threads.
@@ -335,15 +335,21 @@ public:
     }
 
     MeshedTile mesh_tile_at(const TileId& id, double eps) const override {
-        return mesh_at(id, eps, true);
+        return mesh_at(id, eps, true, true);
+    }
+
+    // mesh_tile_at for an encoder, which measures the drawn tile at every valid sample: core
+    // skips its own measure of the exact mesh (core::TriangulateOptions::check_error).
+    MeshedTile mesh_to_encode(const TileId& id, double eps) const {
+        return mesh_at(id, eps, true, false);
     }
 
     // mesh_tile_at, or with drop_voids false the globe terrain's mesh, which draws the voids
     // too: meshed at their filled heights as if they were data (left unconstrained, they would
     // span steep triangles whose every small move, as quantization makes, shifts the valid
     // samples beside them), at the terrain's budget. The raster's valid mask is kept: the
-    // promise holds at the valid samples.
-    MeshedTile mesh_at(const TileId& id, double eps, bool drop_voids) const {
+    // promise holds at the valid samples. `check_error`: see core::TriangulateOptions.
+    MeshedTile mesh_at(const TileId& id, double eps, bool drop_voids, bool check_error) const {
         check_eps(eps, "eps");
         check_id(id);
         MeshedTile t;
@@ -354,7 +360,8 @@ public:
             if (!drop_voids) {
                 valid = fill_for_terrain(pixel);
             }
-            t.mesh = mesh_pixel_tile(pixel, t.budget, drop_voids, options_.mesh_threads);
+            t.mesh =
+                mesh_pixel_tile(pixel, t.budget, drop_voids, options_.mesh_threads, check_error);
             t.raster = std::move(pixel.raster);
             if (!drop_voids) {
                 t.raster.grid.valid.swap(valid);
@@ -363,13 +370,13 @@ public:
         }
         t.raster = make_raster(id);
         if (drop_voids) {
-            t.mesh =
-                to_tile_mesh(t.raster, mesh_tile(t.raster, t.budget, options_.mesh_threads), true);
+            t.mesh = to_tile_mesh(
+                t.raster, mesh_tile(t.raster, t.budget, options_.mesh_threads, check_error), true);
         } else {
             TileRaster filled = t.raster;
             filled.grid.valid.clear();
-            t.mesh =
-                to_tile_mesh(filled, mesh_tile(filled, t.budget, options_.mesh_threads), false);
+            t.mesh = to_tile_mesh(
+                filled, mesh_tile(filled, t.budget, options_.mesh_threads, check_error), false);
         }
         // Every valid source pixel under the tile, as the drawn tile must hold it.
         for (const SourcePixel& p : source_->pixels_in(t.raster.bounds)) {
@@ -551,7 +558,7 @@ private:
         const double target = terrain_budget_at(id.z, eps).drawn_bound;
         TerrainDraft draft;
         MeshedTile& t = draft.meshed;
-        t = mesh_at(id, eps, false);
+        t = mesh_at(id, eps, false, false); // quantize_within measures every valid sample
         if (t.mesh.triangle_count() == 0) {
             throw NotFound("tile " + tile_name(id) + ": no triangle from the DEM"); // filler
         }
@@ -1042,13 +1049,14 @@ void check_eps(double eps, const std::string& what) {
     }
 }
 
-core::Mesh mesh_tile(const TileRaster& raster, const ErrorBudget& budget, int threads) {
+core::Mesh
+mesh_tile(const TileRaster& raster, const ErrorBudget& budget, int threads, bool check_error) {
     // Two strips on two threads: a tile requested cold is ready in about 60 % of the time for
     // 0.1-0.7 % more triangles (the cut column is a locked border, as between two tiles).
     constexpr int kStrips = 2;
     return core::triangulate_strips(
         raster.grid,
-        core::TriangulateOptions{budget.mesh_eps, true, budget.max_edge},
+        core::TriangulateOptions{budget.mesh_eps, true, budget.max_edge, check_error},
         kStrips,
         threads,
         run_on_helper);

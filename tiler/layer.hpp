@@ -148,8 +148,13 @@ void check_eps(double eps, const std::string& what);
 
 // The tile mesh exactly as encoded: core::triangulate_strips(raster.grid, ..., 2) at
 // budget.mesh_eps with locked borders and budget.max_edge (see tile_error_budget): two strips
-// meshed on up to `threads` threads, stitched along a locked middle column.
-core::Mesh mesh_tile(const TileRaster& raster, const ErrorBudget& budget, int threads = 2);
+// meshed on up to `threads` threads, stitched along a locked middle column. Without
+// `check_error` core does not measure the mesh's error at every sample (the caller's encoder
+// measures the drawn tile's; see core::TriangulateOptions::check_error).
+core::Mesh mesh_tile(const TileRaster& raster,
+                     const ErrorBudget& budget,
+                     int threads = 2,
+                     bool check_error = true);
 
 // A mesh in grid coordinates as text: OBJ ("v column row height", 1-based "f i j k") or JSON
 // ({"vertices":[x,y,z,...],"triangles":[i,j,k,...]}, 0-based), heights as the float the mesher

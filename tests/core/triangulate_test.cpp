@@ -3,6 +3,7 @@
 #include <doctest/doctest.h>
 
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "core/error.hpp"
@@ -158,5 +159,32 @@ TEST_CASE("max_error equals the oracle's largest error where the heights moved (
         REQUIRE_MESSAGE(v.problem.empty(), v.problem);
         CHECK(tb::core::max_error(m, moved) ==
               doctest::Approx(static_cast<double>(v.max_error)).epsilon(1e-12));
+    }
+}
+
+TEST_CASE("without its own error pass the mesh is the same and still within eps (seeds 12, 13)") {
+    // check_error off skips triangulate()'s last measure (callers that measure what they draw
+    // turn it off); the bound must then hold by construction, and nothing else may change.
+    for (const auto& kind : kKinds) {
+        for (const auto& [w, h, seed] : {std::tuple{65, 65, 12}, std::tuple{130, 47, 13}}) {
+            const HeightGrid g = terrain::named(kind, w, h, seed);
+            for (double eps : {0.125, 2.0}) {
+                INFO(kind, " ", w, "x", h, " eps=", eps);
+                TriangulateOptions checked{.eps = eps, .max_edge = 12.0};
+                TriangulateOptions unchecked = checked;
+                unchecked.check_error = false;
+                for (int strips : {1, 2}) {
+                    INFO("strips=", strips);
+                    const Mesh a = tb::core::triangulate_strips(g, checked, strips);
+                    const Mesh b = tb::core::triangulate_strips(g, unchecked, strips);
+                    CHECK(b.points == a.points);
+                    CHECK(b.triangles == a.triangles);
+                    CHECK(b.halfedges == a.halfedges);
+                    const oracle::Verdict v = oracle::judge(b, g, eps);
+                    CHECK_MESSAGE(v.problem.empty(), v.problem);
+                    CHECK_MESSAGE(v.over_eps == 0, "max error ", static_cast<double>(v.max_error));
+                }
+            }
+        }
     }
 }

@@ -294,8 +294,8 @@ PixelTile make_pixel_tile(const DemSource& source,
     return t;
 }
 
-TileMesh
-mesh_pixel_tile(const PixelTile& t, const ErrorBudget& budget, bool drop_voids, int threads) {
+TileMesh mesh_pixel_tile(
+    const PixelTile& t, const ErrorBudget& budget, bool drop_voids, int threads, bool check_error) {
     const core::HeightGrid& grid = t.raster.grid;
     const int w = grid.width, h = grid.height;
     TB_ASSERT(budget.max_edge == 0 || budget.max_edge >= kMinPixelEdge - 1e-12);
@@ -372,12 +372,12 @@ mesh_pixel_tile(const PixelTile& t, const ErrorBudget& budget, bool drop_voids, 
     // The block: core's mesh, or for a block one pixel thin the optimal fit of its one line.
     std::vector<int> inner[4]; // positions along each side of the block, increasing
     if (w >= 2 && h >= 2) {
-        const core::Mesh mesh =
-            core::triangulate_strips(grid,
-                                     core::TriangulateOptions{budget.mesh_eps, true, core_edge},
-                                     2,
-                                     threads,
-                                     run_on_helper);
+        const core::Mesh mesh = core::triangulate_strips(
+            grid,
+            core::TriangulateOptions{budget.mesh_eps, true, core_edge, check_error},
+            2,
+            threads,
+            run_on_helper);
         std::vector<core::Index> id(mesh.points.size());
         for (std::size_t v = 0; v < mesh.points.size(); ++v) {
             const core::GridPoint p = mesh.points[v];

@@ -72,10 +72,12 @@ ErrorBudget pixel_error_budget(double eps,
 // vertex with no data beside it, are left out (with drop_voids; without, every triangle is kept
 // and voids are drawn at their filled heights, as a globe that must cover the tile needs);
 // every edge is at most budget.max_edge pixels. `threads` caps the threads meshing the block's
-// strips (the mesh is the same for any value).
+// strips (the mesh is the same for any value). `check_error`: see
+// core::TriangulateOptions::check_error (off when an encoder measures the drawn tile).
 TileMesh mesh_pixel_tile(const PixelTile& tile,
                          const ErrorBudget& budget,
                          bool drop_voids = true,
-                         int threads = 2);
+                         int threads = 2,
+                         bool check_error = true);
 
 } // namespace tb::tiler
