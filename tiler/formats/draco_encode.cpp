@@ -167,43 +167,44 @@ snapped_error(const TileRaster& raster, const TileMesh& mesh, const GridVertices
     const int width = grid.width, height = grid.height;
     const std::size_t count = static_cast<std::size_t>(width) * height;
     constexpr double kEdge = -1e-9; // barycentric slack: on an edge counts as inside
-    std::vector<double> outside(count, std::numeric_limits<double>::infinity());
-    std::vector<double> error(count, 0.0);
     const auto lo3 = [](double u, double v, double w) { return std::min({u, v, w}); };
     const auto hi3 = [](double u, double v, double w) { return std::max({u, v, w}); };
-    // Sample (x, y) against triangle (a, b, c): inside (within the slack) it keeps the worst
-    // error of the triangles holding it; outside all of them, the error on the nearest one.
-    const auto visit = [&](const std::array<double, 3>& a,
-                           const std::array<double, 3>& b,
-                           const std::array<double, 3>& c,
-                           double det,
-                           int x,
-                           int y) {
-        const std::size_t k = static_cast<std::size_t>(y) * width + x;
-        if (!grid.is_valid(x, y)) {
-            return;
+    // The worst sample so far: the largest error, the first sample (row-major) on a tie, as a
+    // row-major scan of every sample's own error finds it.
+    struct Worst {
+        double error = 0;
+        std::size_t k = 0;
+        void take(double e, std::size_t at) {
+            if (e > error || (e == error && e > 0 && at < k)) {
+                error = e;
+                k = at;
+            }
         }
+    };
+    // Sample (x, y) against triangle (a, b, c): its error, and how far outside (0: inside,
+    // within the slack).
+    const auto measure = [&](const std::array<double, 3>& a,
+                             const std::array<double, 3>& b,
+                             const std::array<double, 3>& c,
+                             double det,
+                             int x,
+                             int y,
+                             double& out) {
         const double la = ((b[0] - x) * (c[1] - y) - (c[0] - x) * (b[1] - y)) / det;
         const double lb = ((c[0] - x) * (a[1] - y) - (a[0] - x) * (c[1] - y)) / det;
         const double lc = 1 - la - lb;
-        const double e = std::abs(la * a[2] + lb * b[2] + lc * c[2] - grid.at(x, y));
-        const double out = std::max(0.0, -lo3(la, lb, lc) + kEdge);
-        if (out == 0) {
-            error[k] = outside[k] == 0 ? std::max(error[k], e) : e;
-            outside[k] = 0;
-        } else if (out < outside[k]) {
-            outside[k] = out;
-            error[k] = e;
-        }
+        out = std::max(0.0, -lo3(la, lb, lc) + kEdge);
+        return std::abs(la * a[2] + lb * b[2] + lc * c[2] - grid.at(x, y));
     };
-    // Pass 1, every sample a triangle holds: row by row, over the x-extent of the triangle
-    // within a band of +-band around the row, widened by band. A sample within the slack of a
-    // triangle lies at most 1e-9 of the triangle's height outside it (a few 1e-9 of its
-    // extent), so a band of 1e-3 pixels plus 1e-8 of the extent finds it, however far a
-    // vertex lies (a snapped pole can sit far outside the tile). Rows [first, last] only: each
-    // sample is visited by the triangles in the same order whichever rows a call takes, so
-    // row ranges on separate threads give the same bits as one pass.
-    const auto pass1 = [&](int first, int last) {
+    // Pass 1, every sample a triangle holds (its error is the worst of the triangles holding
+    // it, so only the worst of all is kept, and a byte per sample saying it is held): row by
+    // row, over the x-extent of the triangle within a band of +-band around the row, widened by
+    // band. A sample within the slack of a triangle lies at most 1e-9 of the triangle's height
+    // outside it (a few 1e-9 of its extent), so a band of 1e-3 pixels plus 1e-8 of the extent
+    // finds it, however far a vertex lies (a snapped pole can sit far outside the tile). Rows
+    // [first, last] only; the worst of two row ranges is the worst of one pass.
+    std::vector<std::uint8_t> held(count, 0);
+    const auto pass1 = [&](int first, int last, Worst& worst) {
         for (std::size_t t = 0; t < mesh.triangle_count(); ++t) {
             const auto [a, b, c, det] = snapped_triangle(mesh, g, t);
             if (det == 0) {
@@ -241,44 +242,51 @@ snapped_error(const TileRaster& raster, const TileMesh& mesh, const GridVertices
                 const int x0 = std::max(0, static_cast<int>(std::ceil(x_lo - band)));
                 const int x1 = std::min(width - 1, static_cast<int>(std::floor(x_hi + band)));
                 for (int x = x0; x <= x1; ++x) {
-                    visit(a, b, c, det, x, y);
+                    if (!grid.is_valid(x, y)) {
+                        continue;
+                    }
+                    double out = 0;
+                    const double e = measure(a, b, c, det, x, y, out);
+                    if (out == 0) {
+                        const std::size_t k = static_cast<std::size_t>(y) * width + x;
+                        held[k] = 1;
+                        worst.take(e, k);
+                    }
                 }
             }
         }
     };
+    Worst worst;
     // Two row halves on two threads for a tile worth it (a cold tile in the server).
     if (threads >= 2 && height >= kMinRowsToSplit) {
         const int mid = height / 2;
-        Beside<void> lower = beside([&pass1, mid, height] { pass1(mid, height - 1); });
-        pass1(0, mid - 1);
+        Worst lower_worst;
+        Beside<void> lower =
+            beside([&pass1, &lower_worst, mid, height] { pass1(mid, height - 1, lower_worst); });
+        pass1(0, mid - 1, worst);
         lower.get();
+        worst.take(lower_worst.error, lower_worst.k);
     } else {
-        pass1(0, height - 1);
+        pass1(0, height - 1, worst);
     }
-    // Pass 2, the samples pass 1 found in no triangle (border samples a snapped vertex moved a
-    // hair away from): each anew against every triangle within a pixel of it, exactly as one
-    // loop over every triangle's widened bounding box would: the nearest one deciding, or the
-    // worst of those holding it after all. Triangles with no such sample within a pixel are
-    // skipped by a prefix count.
-    std::vector<std::uint8_t> open(count, 0);
-    std::vector<std::uint32_t> uncovered(static_cast<std::size_t>(width + 1) * (height + 1), 0);
-    const auto at = [&](int x, int y) -> std::uint32_t& {
-        return uncovered[static_cast<std::size_t>(y) * (width + 1) + x];
-    };
-    bool any = false;
+    // Pass 2, the valid samples pass 1 found in no triangle (border samples a snapped vertex
+    // moved a hair away from), few: each against every triangle within a pixel of it, in
+    // triangle order, exactly as one loop over every triangle's widened bounding box would:
+    // the nearest one deciding, or the worst of those holding it after all. They are listed by
+    // row (row_start), so a triangle finds those in its box by a binary search per row.
+    std::vector<std::uint32_t> row_start(static_cast<std::size_t>(height) + 1, 0);
+    std::vector<int> open_x;
     for (int y = 0; y < height; ++y) {
         for (int x = 0; x < width; ++x) {
-            const std::size_t k = static_cast<std::size_t>(y) * width + x;
-            open[k] = grid.is_valid(x, y) && outside[k] != 0 ? 1 : 0;
-            if (open[k] != 0) {
-                outside[k] = std::numeric_limits<double>::infinity();
-                error[k] = 0;
-                any = true;
+            if (grid.is_valid(x, y) && held[static_cast<std::size_t>(y) * width + x] == 0) {
+                open_x.push_back(x);
             }
-            at(x + 1, y + 1) = open[k] + at(x, y + 1) + at(x + 1, y) - at(x, y);
         }
+        row_start[static_cast<std::size_t>(y) + 1] = static_cast<std::uint32_t>(open_x.size());
     }
-    for (std::size_t t = 0; any && t < mesh.triangle_count(); ++t) {
+    std::vector<double> outside(open_x.size(), std::numeric_limits<double>::infinity());
+    std::vector<double> error(open_x.size(), 0.0);
+    for (std::size_t t = 0; !open_x.empty() && t < mesh.triangle_count(); ++t) {
         const auto [a, b, c, det] = snapped_triangle(mesh, g, t);
         if (det == 0) {
             continue;
@@ -287,25 +295,36 @@ snapped_error(const TileRaster& raster, const TileMesh& mesh, const GridVertices
         const int x1 = std::min(width - 1, int(std::ceil(hi3(a[0], b[0], c[0]))) + 1);
         const int y0 = std::max(0, int(std::floor(lo3(a[1], b[1], c[1]))) - 1);
         const int y1 = std::min(height - 1, int(std::ceil(hi3(a[1], b[1], c[1]))) + 1);
-        if (x0 > x1 || y0 > y1 ||
-            at(x1 + 1, y1 + 1) - at(x0, y1 + 1) - at(x1 + 1, y0) + at(x0, y0) == 0) {
-            continue;
-        }
         for (int y = y0; y <= y1; ++y) {
-            for (int x = x0; x <= x1; ++x) {
-                if (open[static_cast<std::size_t>(y) * width + x] != 0) {
-                    visit(a, b, c, det, x, y);
+            const auto row_begin = open_x.begin() + row_start[static_cast<std::size_t>(y)];
+            const auto row_end = open_x.begin() + row_start[static_cast<std::size_t>(y) + 1];
+            for (auto it = std::lower_bound(row_begin, row_end, x0); it != row_end && *it <= x1;
+                 ++it) {
+                const std::size_t i = static_cast<std::size_t>(it - open_x.begin());
+                double out = 0;
+                const double e = measure(a, b, c, det, *it, y, out);
+                if (out == 0) {
+                    error[i] = outside[i] == 0 ? std::max(error[i], e) : e;
+                    outside[i] = 0;
+                } else if (out < outside[i]) {
+                    outside[i] = out;
+                    error[i] = e;
                 }
             }
         }
     }
-    Verdict verdict;
-    for (std::size_t k = 0; k < count; ++k) {
-        if (error[k] > verdict.max_error) {
-            verdict.max_error = error[k];
-            verdict.column = static_cast<int>(k % width);
-            verdict.row = static_cast<int>(k / width);
+    for (int y = 0; y < height; ++y) {
+        for (std::uint32_t i = row_start[static_cast<std::size_t>(y)];
+             i < row_start[static_cast<std::size_t>(y) + 1];
+             ++i) {
+            worst.take(error[i], static_cast<std::size_t>(y) * width + open_x[i]);
         }
+    }
+    Verdict verdict;
+    if (worst.error > 0) {
+        verdict.max_error = worst.error;
+        verdict.column = static_cast<int>(worst.k % width);
+        verdict.row = static_cast<int>(worst.k / width);
     }
     return verdict;
 }
