@@ -454,6 +454,33 @@ TEST_CASE("a mesa with 1000 m cliffs keeps eps: steep interior triangles get a f
     CHECK(d.metadata.doubles.at("quant_step_m") < b.quant_step);
 }
 
+TEST_CASE("the snapped surface must leave room for the chord sag: a mesh off by more is refused") {
+    // A flat tile with one bump sample, meshed as two triangles that miss the bump by d. The
+    // encoder measures the snapped surface linearly in grid coordinates; the chord sag (up to
+    // budget.sag) comes on top, so only d up to eps - sag can be published as eps.
+    const ErrorBudget b = error_budget(1.0);
+    REQUIRE(b.drawn_bound == 1.0);
+    REQUIRE(b.sag == doctest::Approx(0.1));
+    for (const float d : {0.85f, 0.95f}) {
+        CAPTURE(d);
+        const Terrain bump = [d](std::int64_t c, std::int64_t r) {
+            return c % 16 == 8 && r % 16 == 8 ? 300.0f + d : 300.0f;
+        };
+        const TileRaster r = make_raster({14, 9000, 11000}, 16, bump);
+        const core::Mesh mesh = core::triangulate(r.grid, {0.99, true});
+        REQUIRE(mesh.triangle_count() == 2);
+        if (d < 0.9f) {
+            // Within eps - sag even after snapping (a flat tile moves by at most s*sqrt(3)/2).
+            const DecodedTile t = decode_drc(encode_tile(r, mesh, Format::Drc, b));
+            CHECK(t.indices.size() == 6);
+        } else {
+            // Within eps, but not with the sag on top: no bound of eps may be published.
+            CHECK_THROWS_AS(encode_tile(r, mesh, Format::Drc, b), tb::Error);
+            CHECK_THROWS_AS(encode_tile(r, mesh, Format::Glb, b), tb::Error);
+        }
+    }
+}
+
 TEST_CASE(
     "real DEM tiles made by the layer stay within eps after decoding (S33W071.tif, Aconcagua)") {
     const std::string path = std::string(TB_SHARED_DATA) + "/S33W071.tif";

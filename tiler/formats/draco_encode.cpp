@@ -826,6 +826,9 @@ std::string encode_tile(const TileRaster& raster,
     std::vector<Ecef> world(n);
     GridVertices grid_world;
     Snapped snap; // the lattice of the last round: the one kept
+    // What the snapped surface may miss a sample by, measured linearly in grid coordinates:
+    // the chord sag (at most budget.sag, by the budget's longest edge) comes on top of it.
+    const double allowed = budget.drawn_bound - budget.sag;
     for (int refine = 0;; ++refine) {
         step = std::ldexp(s, -refine);
         for (std::size_t v = 0; v < n; ++v) {
@@ -868,17 +871,17 @@ std::string encode_tile(const TileRaster& raster,
         grid_world = to_grid(raster, world);
         const Verdict verdict =
             snapped_error(raster, mesh, grid_world, early.valid() ? 1 : threads);
-        if (early.valid() && !(verdict.max_error <= budget.eps)) {
+        if (early.valid() && !(verdict.max_error <= allowed)) {
             try {
                 early.get(); // the lattice is refined: these bytes are not used
             } catch (const std::exception&) {
                 // encoded again below, where a real failure throws
             }
         }
-        if (verdict.max_error <= budget.eps) {
+        if (verdict.max_error <= allowed) {
             if (refine > 0) {
                 log::debug("tile " + tile_name(raster.id) + ": interior lattice refined to " +
-                           number(step) + " m to keep eps " + number(budget.eps) + " m");
+                           number(step) + " m to keep eps " + number(budget.drawn_bound) + " m");
             }
             break;
         }
@@ -887,8 +890,9 @@ std::string encode_tile(const TileRaster& raster,
                         number(s) + " m lattice moves the surface by up to " +
                         number(verdict.max_error) + " m at sample (" +
                         std::to_string(verdict.column) + ", " + std::to_string(verdict.row) +
-                        "), more than eps " + number(budget.eps) +
-                        " m (a near-vertical cliff on the tile border); this is a bug, "
+                        "), more than the " + number(allowed) + " m that eps " +
+                        number(budget.drawn_bound) + " m leaves beside the chord sag (a " +
+                        "near-vertical cliff on the tile border); this is a bug, "
                         "please report it with the tile");
         }
     }

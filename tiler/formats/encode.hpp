@@ -95,9 +95,10 @@ spacing_error_budget(double eps, double spacing_m, double min_edge, double sag_s
 // lattice-aligned origin) and handed to Draco with explicit quantization on that lattice, so
 // Draco's float32 dequantization reproduces them exactly. Vertex and triangle counts are kept
 // (no deduplication); triangles are wound counter-clockwise seen from above.
-// On return the decoded tile is within budget.eps of every valid sample of raster.grid
-// (heights interpolated linearly in the raster's grid coordinates, as the mesher measures
-// them), checked here: where the level lattice breaks that (a triangle steeper than
+// On return the decoded tile is within budget.drawn_bound - budget.sag of every valid sample of
+// raster.grid (heights interpolated linearly in the raster's grid coordinates, as the mesher
+// measures them), checked here, so that with the chord sag the drawn tile is within
+// budget.drawn_bound (eps): where the level lattice breaks that (a triangle steeper than
 // kQuantMaxSlope), vertices off the border (mesh.border == 0) are snapped to s/2^k (k <= 6), of
 // which s is a sublattice, so shared border vertices still decode identically in both tiles.
 // A mesh without triangles (a tile whose data are all voids) encodes as an empty tile: a glb
