@@ -193,7 +193,6 @@ bool Refiner::try_remove(Index v, std::vector<Index>& ring) {
     // The sides found valid or not here are the dynamic program's too (the same test).
     auto& side = scratch_.dp.side;
     side.assign(n * n, -1);
-    scratch_.dp.side_ready = true;
     if (v_counts) {
         const auto side_ok = [&](int i, int k) {
             std::int8_t& known =
@@ -238,6 +237,7 @@ bool Refiner::try_remove(Index v, std::vector<Index>& ring) {
         if (attempt == kMaxAttempts) {
             return false;
         }
+        scratch_.dp.side_ready = true; // this polygon's sides, as far as known
         tris = triangulate_polygon(pts, cost, nullptr, &scratch_.dp, &pv);
         if (!tris) {
             return false;

@@ -42,7 +42,8 @@ struct PolygonDpScratch {
     // side[i * n + k], i < k: 1 when v_i v_k may be a side of a sub-polygon (a polygon edge or
     // a valid diagonal), 0 when not, -1 while unknown; filled as the program needs it. A
     // caller that has filled some entries itself for this polygon (n * n entries, the rest -1)
-    // sets side_ready, and the program keeps them.
+    // sets side_ready before the call, and the program keeps them; it clears side_ready, so the
+    // next call starts afresh unless its caller sets it again.
     std::vector<std::int8_t> side;
     bool side_ready = false;
     std::vector<std::optional<TriangleCost>> best;
@@ -83,6 +84,7 @@ std::optional<std::vector<std::array<int, 3>>> triangulate_polygon(std::span<con
     if (!mem.side_ready) {
         side.assign(static_cast<std::size_t>(n * n), -1);
     }
+    mem.side_ready = false;
     // Tested only for the pairs (i, k) that some apex j could close: most diagonals of a hole
     // that cannot be triangulated never are.
     const auto side_ok = [&](int i, int k) {
