@@ -101,15 +101,15 @@ bool Refiner::try_remove(Index v, std::vector<Index>& ring) {
             }
         }
     }
+    const auto at = [&](int r, int q) {
+        return toward_v[static_cast<std::size_t>(r) * n + static_cast<std::size_t>(q)];
+    };
     // Whether a candidate triangle (i < j < k) honours v, if it covers v: an O(1) test before
     // any scan.
     const auto honours_v = [&](int i, int j, int k, bool& covers) {
         const GridPoint a = pts[static_cast<std::size_t>(i)];
         const GridPoint b = pts[static_cast<std::size_t>(j)];
         const GridPoint c = pts[static_cast<std::size_t>(k)];
-        const auto at = [&](int r, int q) {
-            return toward_v[static_cast<std::size_t>(r) * n + static_cast<std::size_t>(q)];
-        };
         // orient2d(b, c, pv), orient2d(c, a, pv) = -orient2d(a, c, pv), orient2d(a, b, pv).
         const std::int64_t wa = at(j, k), wb = -at(i, k), wc = at(i, j);
         // The three sum to orient2d(a, b, c) exactly, wherever pv lies.
@@ -191,33 +191,22 @@ bool Refiner::try_remove(Index v, std::vector<Index>& ring) {
     // Every re-triangulation has a triangle covering v. Those candidates are tried first, so
     // that a removal that cannot work usually fails after a few scans instead of all of them.
     // The sides found valid or not here are the dynamic program's too (the same test).
-    auto& side = scratch_.dp.side;
-    side.assign(n * n, -1);
+    auto& dp = scratch_.dp;
+    dp.side.assign(n * n, -1);
     if (v_counts) {
-        const auto side_ok = [&](int i, int k) {
-            std::int8_t& known =
-                side[static_cast<std::size_t>(i) * n + static_cast<std::size_t>(k)];
-            if (known < 0) {
-                const bool edge = k == i + 1 || (i == 0 && k == static_cast<int>(n) - 1);
-                known = edge || valid_diagonal_star(pts, pv, i, k) ? 1 : 0;
-            }
-            return known == 1;
-        };
+        const auto side_ok = [&](int i, int k) { return dp.side_ok(pts, &pv, i, k); };
         // In the same order as every (i < j < k), but the signs of toward_v rule out most of
         // the triangles not covering v before honours_v looks at them: (i, j, k) covers v only
         // when orient2d(pts[i], pts[j], pv) >= 0, orient2d(pts[j], pts[k], pv) >= 0 and
         // orient2d(pts[i], pts[k], pv) <= 0.
-        const auto w = [&](int r, int q) {
-            return toward_v[static_cast<std::size_t>(r) * n + static_cast<std::size_t>(q)];
-        };
         bool any = false;
         for (int i = 0; i < static_cast<int>(n) && !any; ++i) {
             for (int j = i + 1; j < static_cast<int>(n) && !any; ++j) {
-                if (w(i, j) < 0) {
+                if (at(i, j) < 0) {
                     continue;
                 }
                 for (int k = j + 1; k < static_cast<int>(n) && !any; ++k) {
-                    if (w(j, k) < 0 || w(i, k) > 0) {
+                    if (at(j, k) < 0 || at(i, k) > 0) {
                         continue;
                     }
                     bool covers = false;
@@ -237,8 +226,8 @@ bool Refiner::try_remove(Index v, std::vector<Index>& ring) {
         if (attempt == kMaxAttempts) {
             return false;
         }
-        scratch_.dp.side_ready = true; // this polygon's sides, as far as known
-        tris = triangulate_polygon(pts, cost, nullptr, &scratch_.dp, &pv);
+        dp.side_ready = true; // this polygon's sides, as far as known
+        tris = triangulate_polygon(pts, cost, nullptr, &dp, &pv);
         if (!tris) {
             return false;
         }

@@ -46,6 +46,21 @@ struct PolygonDpScratch {
     // next call starts afresh unless its caller sets it again.
     std::vector<std::int8_t> side;
     bool side_ready = false;
+    // Whether v_i v_k (i < k) may be a side of a sub-polygon of v: a polygon edge, or a valid
+    // diagonal (valid_diagonal_star around star_center when given, else valid_diagonal); tested
+    // once per pair and kept in `side`, which must hold v.size()^2 entries.
+    bool side_ok(std::span<const GridPoint> v, const GridPoint* star_center, int i, int k) {
+        const int n = static_cast<int>(v.size());
+        std::int8_t& known = side[static_cast<std::size_t>(i * n + k)];
+        if (known < 0) {
+            const bool edge = k == i + 1 || (i == 0 && k == n - 1);
+            known = edge || (star_center != nullptr ? valid_diagonal_star(v, *star_center, i, k)
+                                                    : valid_diagonal(v, i, k))
+                        ? 1
+                        : 0;
+        }
+        return known == 1;
+    }
     std::vector<std::optional<TriangleCost>> best;
     std::vector<int> apex;
 };
@@ -80,24 +95,10 @@ std::optional<std::vector<std::array<int, 3>>> triangulate_polygon(std::span<con
     const auto idx = [n](int i, int k) { return static_cast<std::size_t>(i * n + k); };
     PolygonDpScratch local;
     PolygonDpScratch& mem = scratch != nullptr ? *scratch : local;
-    auto& side = mem.side;
     if (!mem.side_ready) {
-        side.assign(static_cast<std::size_t>(n * n), -1);
+        mem.side.assign(static_cast<std::size_t>(n * n), -1);
     }
     mem.side_ready = false;
-    // Tested only for the pairs (i, k) that some apex j could close: most diagonals of a hole
-    // that cannot be triangulated never are.
-    const auto side_ok = [&](int i, int k) {
-        std::int8_t& known = side[idx(i, k)];
-        if (known < 0) {
-            const bool edge = k == i + 1 || (i == 0 && k == n - 1);
-            known = edge || (star_center != nullptr ? valid_diagonal_star(v, *star_center, i, k)
-                                                    : valid_diagonal(v, i, k))
-                        ? 1
-                        : 0;
-        }
-        return known == 1;
-    };
     auto& best = mem.best;
     best.assign(static_cast<std::size_t>(n * n), std::nullopt);
     auto& apex = mem.apex;
@@ -114,7 +115,9 @@ std::optional<std::vector<std::array<int, 3>>> triangulate_polygon(std::span<con
                 if (!left || !right) {
                     continue;
                 }
-                if (!side_ok(i, k)) {
+                // Tested only for the pairs (i, k) that some apex j could close: most diagonals of
+                // a hole that cannot be triangulated never are.
+                if (!mem.side_ok(v, star_center, i, k)) {
                     break;
                 }
                 if (orient2d(v[static_cast<std::size_t>(i)],
