@@ -662,11 +662,21 @@ private:
             }
             const auto col = [&g](double x) { return (x - g.x0) / g.dx - 0.5; };
             const auto row = [&g](double y) { return (g.y0 - y) / g.dy - 0.5; };
-            const std::int64_t c0 = static_cast<std::int64_t>(std::floor(col(west))) - 3;
-            const std::int64_t r0 = static_cast<std::int64_t>(std::floor(row(north))) - 3;
-            const int w = static_cast<int>(std::ceil(col(east)) - static_cast<double>(c0)) + 4;
-            const int h = static_cast<int>(std::ceil(row(south)) - static_cast<double>(r0)) + 4;
-            const std::vector<double> px = source_->read_pixels(c0, r0, w, h);
+            // The tile and 3 pixels around it, the part inside the raster only: beyond it every
+            // pixel is nodata, which the lookups skip as they skip pixels off the window (a
+            // tile at the source's edge would otherwise fill megabytes with NaN).
+            const auto first_col = static_cast<std::int64_t>(std::floor(col(west))) - 3;
+            const auto first_row = static_cast<std::int64_t>(std::floor(row(north))) - 3;
+            const auto end_col = static_cast<std::int64_t>(std::ceil(col(east))) + 4;
+            const auto end_row = static_cast<std::int64_t>(std::ceil(row(south))) + 4;
+            const std::int64_t c0 = std::max<std::int64_t>(first_col, 0);
+            const std::int64_t r0 = std::max<std::int64_t>(first_row, 0);
+            const int w = static_cast<int>(std::max<std::int64_t>(
+                std::min<std::int64_t>(end_col, g.width) - c0, 0));
+            const int h = static_cast<int>(std::max<std::int64_t>(
+                std::min<std::int64_t>(end_row, g.height) - r0, 0));
+            const std::vector<double> px =
+                w > 0 && h > 0 ? source_->read_pixels(c0, r0, w, h) : std::vector<double>();
             const auto bilinear = [&](double fc, double fr, double& value) {
                 const double ic = std::floor(fc), ir = std::floor(fr);
                 const double tc = fc - ic, tr = fr - ir;

@@ -4,6 +4,7 @@
 #include "tests/tiler/test_raster_util.hpp"
 #include "tiler/formats/draco_decode.hpp"
 #include "tiler/layer.hpp"
+#include "tiler/mesh/pixel_tile.hpp"
 #include "tiler/sources/gdal_source.hpp"
 #include "tiler/sources/geoid.hpp"
 
@@ -106,6 +107,70 @@ TEST_CASE("EGM96 heights become ellipsoidal by adding the geoid undulation") {
         CHECK(n == doctest::Approx(-28).epsilon(0.15));
         CHECK(a.grid.at(k, 256 - k) - b.grid.at(k, 256 - k) == doctest::Approx(n).epsilon(1e-4));
     }
+}
+
+TEST_CASE("a pixel tile holds each source pixel plus the EGM96 undulation at its centre, bit "
+          "for bit, and an ellipsoidal source's own heights") {
+    // make_pixel_tile evaluates the geoid by column and row; this pins it to egm96_undulation
+    // at every pixel centre, in both schemes, with voids in the window.
+    ScratchDir dir;
+    const auto check = [&](const std::string& name, int epsg, std::array<double, 6> gt,
+                           Scheme scheme) {
+        Fixture f;
+        f.width = 70, f.height = 60;
+        f.type = GDT_Float64;
+        f.epsg = epsg;
+        f.geotransform = gt;
+        f.nodata = -9999;
+        for (int j = 0; j < f.height; ++j) {
+            for (int i = 0; i < f.width; ++i) {
+                f.values.push_back((i * 7 + j * 3) % 41 == 0 ? -9999.0
+                                                             : 800 + 90 * std::sin(i * 0.31) +
+                                                                   40 * std::cos(j * 0.17) + i * 1e-7);
+            }
+        }
+        const std::string path = tb_test::write_fixture(dir.file(name), f);
+        const auto source = DemSource::open({path});
+        const std::optional<PixelGrid> g = source->pixel_grid(scheme);
+        REQUIRE(g.has_value());
+        const auto layer = open_layer({path}, scheme, VerticalDatum::Egm96);
+        const int z = layer->max_zoom();
+        const TileRange r = layer->tiles_at(z);
+        std::size_t pixels = 0;
+        for (std::int64_t x = r.x0; x <= r.x1; ++x) {
+            for (std::int64_t y = r.y0; y <= r.y1; ++y) {
+                const TileId tile{z, x, y};
+                PixelTile egm, ell;
+                try {
+                    egm = make_pixel_tile(*source, *g, scheme, tile, VerticalDatum::Egm96);
+                    ell = make_pixel_tile(*source, *g, scheme, tile, VerticalDatum::Ellipsoid);
+                } catch (const tb::NotFound&) {
+                    continue;
+                }
+                const tb::core::HeightGrid& a = egm.raster.grid;
+                for (int j = 0; j < a.height; ++j) {
+                    for (int i = 0; i < a.width; ++i) {
+                        const std::int64_t gi = egm.column0 + i, gj = egm.row0 + j;
+                        const double v = f.values[static_cast<std::size_t>(gj * f.width + gi)];
+                        if (v == -9999.0) {
+                            CHECK_FALSE(a.is_valid(i, j));
+                            continue;
+                        }
+                        const LonLat p = g->lonlat ? LonLat{g->x(gi), g->y(gj)}
+                                                   : native_to_lonlat(scheme, g->x(gi), g->y(gj));
+                        REQUIRE(a.is_valid(i, j));
+                        CHECK(a.at(i, j) == static_cast<float>(v + egm96_undulation(p.lon, p.lat)));
+                        CHECK(ell.raster.grid.at(i, j) == static_cast<float>(v));
+                        ++pixels;
+                    }
+                }
+            }
+        }
+        CHECK(pixels > 3000);
+    };
+    // 0.001 degree pixels near 8 E, 46 N; 60 m EPSG:3857 pixels there.
+    check("geodetic.tif", 4326, {8.0, 0.001, 0, 46.06, 0, -0.001}, Scheme::Geodetic);
+    check("mercator.tif", 3857, {890555.9, 60.0, 0, 5780000.0, 0, -60.0}, Scheme::Mercator);
 }
 
 TEST_CASE("a raster without georeferencing or without data cannot be tiled, with clear errors") {

@@ -48,9 +48,15 @@ std::int64_t first_index(std::int64_t guess, std::int64_t count, Coord coord, Pa
 struct Window {
     std::int64_t column0 = 0, row0 = 0;
     int width = 0, height = 0;
-    std::vector<double> source; // as read, NaN for nodata
-    std::vector<double> ortho;  // orthometric (or source) heights, voids filled
+    // As read, NaN for nodata: kept apart from ortho only for an ellipsoidal source, whose
+    // valid pixels ortho moves to the geoid. Otherwise ortho holds the source's own heights at
+    // every valid pixel, and this is empty (a coarse tile's window is megabytes, and each
+    // fresh page costs a page fault).
+    std::vector<double> source;
+    std::vector<double> ortho; // orthometric (or source) heights, voids filled
     std::vector<std::uint8_t> valid;
+    // The source's height at valid pixels.
+    const std::vector<double>& measured() const { return source.empty() ? ortho : source; }
     double at(const std::vector<double>& v, std::int64_t i, std::int64_t j) const {
         return v[static_cast<std::size_t>(j - row0) * width +
                  static_cast<std::size_t>(i - column0)];
@@ -79,7 +85,7 @@ Value between(const Window& w,
     double sum = 0, total = 0;
     for (std::size_t k = 0; k < N; ++k) {
         if (w.is_valid(pixels[k].first, pixels[k].second)) {
-            sum += weights[k] * w.at(w.source, pixels[k].first, pixels[k].second);
+            sum += weights[k] * w.at(w.measured(), pixels[k].first, pixels[k].second);
             total += weights[k];
         }
     }
@@ -165,9 +171,12 @@ PixelTile make_pixel_tile(const DemSource& source,
     Window win;
     win.column0 = i0 - m, win.row0 = j0 - m;
     win.width = static_cast<int>(w) + 2 * m, win.height = static_cast<int>(h) + 2 * m;
-    win.source = source.read_pixels(win.column0, win.row0, win.width, win.height);
-    win.valid.resize(win.source.size());
-    win.ortho.resize(win.source.size());
+    const bool ellipsoidal = datum == VerticalDatum::Ellipsoid;
+    win.ortho = source.read_pixels(win.column0, win.row0, win.width, win.height);
+    if (ellipsoidal) {
+        win.source = win.ortho;
+    }
+    win.valid.resize(win.ortho.size());
     const auto lonlat = [&](double x, double y) {
         return g.lonlat ? LonLat{x, y} : native_to_lonlat(scheme, x, y);
     };
@@ -175,19 +184,30 @@ PixelTile make_pixel_tile(const DemSource& source,
         const LonLat p = lonlat(x, y);
         return egm96_undulation(p.lon, p.lat);
     };
-    bool any = false;
+    // The geoid by window column and row (longitude depends on x alone and latitude on y
+    // alone, in both schemes): egm96_at gives egm96_undulation's value, for a product instead
+    // of a projection and two divisions per pixel.
+    std::vector<Egm96Column> geoid_column(static_cast<std::size_t>(win.width));
+    std::vector<Egm96Row> geoid_row(static_cast<std::size_t>(win.height));
+    for (int i = 0; i < win.width; ++i) {
+        geoid_column[static_cast<std::size_t>(i)] =
+            egm96_column(lonlat(g.x(win.column0 + i), g.y(win.row0)).lon);
+    }
+    for (int j = 0; j < win.height; ++j) {
+        geoid_row[static_cast<std::size_t>(j)] =
+            egm96_row(lonlat(g.x(win.column0), g.y(win.row0 + j)).lat);
+    }
     for (int j = 0; j < win.height; ++j) {
         for (int i = 0; i < win.width; ++i) {
             const std::size_t k = static_cast<std::size_t>(j) * win.width + i;
-            const double v = win.source[k];
+            const double v = win.ortho[k];
             win.valid[k] = std::isnan(v) ? 0 : 1;
             win.ortho[k] = std::isnan(v) ? 0.0 : v;
-            if (!std::isnan(v) && datum == VerticalDatum::Ellipsoid) {
+            if (!std::isnan(v) && ellipsoidal) {
                 // Voids are filled in orthometric heights, so data-free areas lie on the geoid.
-                win.ortho[k] -= undulation(g.x(win.column0 + i), g.y(win.row0 + j));
+                win.ortho[k] -= egm96_at(geoid_column[static_cast<std::size_t>(i)],
+                                         geoid_row[static_cast<std::size_t>(j)]);
             }
-            const bool in_block = i >= m && j >= m && i < m + w && j < m + h;
-            any = any || (in_block && win.valid[k]);
         }
     }
     fill_voids(win.ortho, win.valid, win.width, win.height, m, 0.0);
@@ -204,12 +224,16 @@ PixelTile make_pixel_tile(const DemSource& source,
     std::vector<std::uint8_t> valid(r.grid.heights.size());
     bool all_valid = true;
     for (std::int64_t j = 0; j < h; ++j) {
+        const Egm96Row& geoid_j = geoid_row[static_cast<std::size_t>(j + m)];
         for (std::int64_t i = 0; i < w; ++i) {
             const std::int64_t gi = i0 + i, gj = j0 + j;
             const bool measured = win.is_valid(gi, gj);
-            double z = win.at(win.ortho, gi, gj) + undulation(g.x(gi), g.y(gj));
-            if (measured && datum == VerticalDatum::Ellipsoid) {
+            double z;
+            if (measured && ellipsoidal) {
                 z = win.at(win.source, gi, gj); // the source's own ellipsoidal height
+            } else {
+                z = win.at(win.ortho, gi, gj) +
+                    egm96_at(geoid_column[static_cast<std::size_t>(i + m)], geoid_j);
             }
             const std::size_t k = static_cast<std::size_t>(j * w + i);
             r.grid.heights[k] = static_cast<float>(z);
@@ -220,7 +244,6 @@ PixelTile make_pixel_tile(const DemSource& source,
     if (!all_valid) {
         r.grid.valid = std::move(valid);
     }
-    (void)any; // a block of voids still draws nothing: its triangles are dropped when meshed
 
     // Border profiles: linear between the pixels either side of the line.
     const auto column_profile = [&](BorderProfile& p, std::int64_t west_pixel, double x) {

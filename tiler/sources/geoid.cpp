@@ -31,12 +31,11 @@ const FloatGrid& egm96_grid() {
 
 } // namespace
 
-double egm96_undulation(double lon, double lat) {
+Egm96Column egm96_column(double lon) {
     const FloatGrid& g = egm96_grid();
     const auto& t = g.geotransform;
     // Cell-centre coordinates: column c sits at lon t0 + (c + 0.5) t1.
     double u = (lon - t[0]) / t[1] - 0.5;
-    double v = (std::clamp(lat, -90.0, 90.0) - t[3]) / t[5] - 0.5;
     // Wrapped into [0, width): fmod is slow and, for a u already there, returns it unchanged.
     if (!(u >= 0 && u < static_cast<double>(g.width))) {
         u = std::fmod(u, static_cast<double>(g.width));
@@ -44,18 +43,28 @@ double egm96_undulation(double lon, double lat) {
             u += g.width;
         }
     }
+    Egm96Column c;
+    c.c0 = std::min(static_cast<int>(u), g.width - 1);
+    c.c1 = (c.c0 + 1) % g.width; // longitude wraps
+    c.fu = u - c.c0;
+    return c;
+}
+
+Egm96Row egm96_row(double lat) {
+    const FloatGrid& g = egm96_grid();
+    const auto& t = g.geotransform;
+    double v = (std::clamp(lat, -90.0, 90.0) - t[3]) / t[5] - 0.5;
     v = std::clamp(v, 0.0, static_cast<double>(g.height - 1));
-    const int c0 = std::min(static_cast<int>(u), g.width - 1);
-    const int c1 = (c0 + 1) % g.width; // longitude wraps
     const int r0 = std::min(static_cast<int>(v), g.height - 2);
-    const int r1 = r0 + 1;
-    const double fu = u - c0, fv = v - r0;
-    const auto at = [&](int c, int r) {
-        return static_cast<double>(g.values[static_cast<std::size_t>(r) * g.width + c]);
-    };
-    const double top = at(c0, r0) * (1 - fu) + at(c1, r0) * fu;
-    const double bottom = at(c0, r1) * (1 - fu) + at(c1, r1) * fu;
-    return top * (1 - fv) + bottom * fv;
+    Egm96Row r;
+    r.upper = g.values.data() + static_cast<std::size_t>(r0) * g.width;
+    r.lower = r.upper + g.width;
+    r.fv = v - r0;
+    return r;
+}
+
+double egm96_undulation(double lon, double lat) {
+    return egm96_at(egm96_column(lon), egm96_row(lat));
 }
 
 } // namespace tb::tiler
