@@ -771,6 +771,12 @@ std::string encode_tile(const TileRaster& raster,
     TB_ASSERT(n >= 3);
     TB_ASSERT(budget.quant_step > 0 && budget.eps > 0);
     check_lattice_fits(raster, budget);
+    // Normals made on demand need the mesh alone: with two threads they start now, beside the
+    // positions and the lattice below, instead of ahead of the Draco encoding that needs them.
+    Beside<std::vector<std::array<double, 3>>> normals_ahead;
+    if (normals == nullptr && make_normals && threads >= 2) {
+        normals_ahead = beside([&make_normals] { return make_normals(); });
+    }
     const double s = budget.quant_step;
 
     // Exact positions (double): lon/lat from the tile grid, height from the mesh.
@@ -806,14 +812,14 @@ std::string encode_tile(const TileRaster& raster,
     constexpr int kMaxRefine = 6;
     const TileFrame frame{centre, enu, translation, z_min, z_max};
     // With two threads the Draco encoding of the first lattice runs beside the check of the
-    // drawn surface, on the second thread, after the normals when they are made on demand:
-    // nearly every tile keeps that lattice, and a refined one is encoded again after its check.
+    // drawn surface, on the second thread, once the normals made on demand are there: nearly
+    // every tile keeps that lattice, and a refined one is encoded again after its check.
     // The published bound must be known before the check for a .drc (its eps_m), so a .drc
     // with check points is encoded after them. The bytes are the same either way.
     std::vector<std::array<double, 3>> made_normals;
     const auto ensure_normals = [&]() -> const std::vector<std::array<double, 3>>* {
         if (normals == nullptr && make_normals) {
-            made_normals = make_normals();
+            made_normals = normals_ahead.valid() ? normals_ahead.get() : make_normals();
             TB_ASSERT(made_normals.size() == n);
             normals = &made_normals;
         }

@@ -10,8 +10,9 @@
 
 #include <algorithm>
 #include <cmath>
-#include <map>
+#include <cstdint>
 #include <string>
+#include <unordered_map>
 #include <utility>
 
 namespace tb::tiler {
@@ -336,7 +337,12 @@ TileMesh mesh_pixel_tile(
     // -1 and h the north and south ones.
     TileMesh out;
     bool dropped = false; // a triangle was left out (voids, or a strip of no width)
-    std::map<std::pair<int, int>, core::Index> index;
+    // Vertices by key (column + 1, row + 1): a hash map, as a tile has thousands of them.
+    std::unordered_map<std::uint64_t, core::Index> index;
+    const auto key = [](int c, int r) {
+        return std::uint64_t{static_cast<std::uint32_t>(c + 1)} << 32 |
+               static_cast<std::uint32_t>(r + 1);
+    };
     const auto is_line = [w, h](int c, int r) { return c < 0 || c >= w || r < 0 || r >= h; };
     const auto value_of = [&](int c, int r) -> Value {
         if (!is_line(c, r)) {
@@ -355,7 +361,7 @@ TileMesh mesh_pixel_tile(
         return {p.heights[along], p.valid[along] != 0};
     };
     const auto vertex = [&](int c, int r) {
-        const auto [it, fresh] = index.try_emplace({c, r}, core::kNone);
+        const auto [it, fresh] = index.try_emplace(key(c, r), core::kNone);
         if (fresh) {
             const double x = c < 0    ? t.edge[kWest]
                              : c >= w ? t.edge[kEast]
@@ -401,6 +407,7 @@ TileMesh mesh_pixel_tile(
             2,
             threads,
             run_on_helper);
+        index.reserve(mesh.points.size() + 2 * static_cast<std::size_t>(w + h) / 4 + 8);
         std::vector<core::Index> id(mesh.points.size());
         for (std::size_t v = 0; v < mesh.points.size(); ++v) {
             const core::GridPoint p = mesh.points[v];
@@ -507,8 +514,8 @@ TileMesh mesh_pixel_tile(
                                   out.triangles.begin() +
                                       static_cast<std::ptrdiff_t>(first_strip_triangle));
     std::vector<std::pair<int, int>> key_of(out.vertex_count());
-    for (const auto& [key, v] : index) {
-        key_of[v] = key;
+    for (const auto& [k, v] : index) {
+        key_of[v] = {static_cast<int>(k >> 32) - 1, static_cast<int>(k & 0xFFFFFFFFu) - 1};
     }
     for (std::size_t e = first_strip_triangle; e < out.triangles.size(); e += 3) {
         bool keep = true;
