@@ -627,6 +627,11 @@ std::string draco_tile(const TileRaster& raster,
     draco::Encoder encoder;
     encoder.SetSpeedOptions(kDracoSpeed, kDracoSpeed);
     encoder.SetEncodingMethod(draco::MESH_EDGEBREAKER_ENCODING);
+    // One connectivity for every attribute: a tile's normals are one per vertex, so they have
+    // no seams, and Draco would otherwise build, encode and decode a connectivity of their own
+    // (about a fifth of its time on a tile). Clients decode the same triangles, corners and
+    // normals; only the order of the decoded vertices differs, and the file is a little smaller.
+    encoder.options().SetGlobalBool("split_mesh_on_seams", true);
     const float origin[3] = {static_cast<float>(double(snap.origin[0]) * step),
                              static_cast<float>(double(snap.origin[1]) * step),
                              static_cast<float>(double(snap.origin[2]) * step)};
