@@ -301,8 +301,9 @@ public:
     std::string encode_at(const TileId& id, Format format, double eps, bool with_normals) const {
         const MeshedTile t = mesh_to_encode(id, eps);
         // Shading normals, the same function of position as the terrain tiles' (encode_tile
-        // neither adds nor reorders vertices, so they stay aligned with the mesh), made by
-        // encode_tile when it needs them: beside its check, when it has two threads.
+        // neither adds nor reorders vertices, so they stay aligned with the mesh it gives
+        // Draco; a client decodes the vertices in Draco's own order, each with its normal),
+        // made by encode_tile when it needs them: beside the lattice, when it has two threads.
         NormalsFn make_normals;
         if (with_normals && t.mesh.triangle_count() > 0) {
             make_normals = [&] { return vertex_normals(t, id); };

@@ -776,10 +776,12 @@ std::string encode_tile(const TileRaster& raster,
     TB_ASSERT(n >= 3);
     TB_ASSERT(budget.quant_step > 0 && budget.eps > 0);
     check_lattice_fits(raster, budget);
-    // Normals made on demand need the mesh alone: with two threads they start now, beside the
-    // positions and the lattice below, instead of ahead of the Draco encoding that needs them.
+    // With two threads the Draco encoding of the first lattice runs beside the check of the
+    // drawn surface (see below), and the normals made on demand, which need the mesh alone,
+    // start now, beside the positions and the lattice, instead of ahead of that encoding.
+    const bool speculate = threads >= 2 && (format == Format::Glb || points.empty());
     Beside<std::vector<std::array<double, 3>>> normals_ahead;
-    if (normals == nullptr && make_normals && threads >= 2) {
+    if (normals == nullptr && make_normals && speculate) {
         normals_ahead = beside([&make_normals] { return make_normals(); });
     }
     const double s = budget.quant_step;
@@ -830,7 +832,6 @@ std::string encode_tile(const TileRaster& raster,
         }
         return normals;
     };
-    const bool speculate = threads >= 2 && (format == Format::Glb || points.empty());
     Beside<std::string> early;
     double step = s;
     std::vector<std::array<std::int64_t, 3>> q(n);
