@@ -672,10 +672,10 @@ private:
             const auto end_row = static_cast<std::int64_t>(std::ceil(row(south))) + 4;
             const std::int64_t c0 = std::max<std::int64_t>(first_col, 0);
             const std::int64_t r0 = std::max<std::int64_t>(first_row, 0);
-            const int w = static_cast<int>(std::max<std::int64_t>(
-                std::min<std::int64_t>(end_col, g.width) - c0, 0));
-            const int h = static_cast<int>(std::max<std::int64_t>(
-                std::min<std::int64_t>(end_row, g.height) - r0, 0));
+            const int w = static_cast<int>(
+                std::max<std::int64_t>(std::min<std::int64_t>(end_col, g.width) - c0, 0));
+            const int h = static_cast<int>(
+                std::max<std::int64_t>(std::min<std::int64_t>(end_row, g.height) - r0, 0));
             const std::vector<double> px =
                 w > 0 && h > 0 ? source_->read_pixels(c0, r0, w, h) : std::vector<double>();
             const auto bilinear = [&](double fc, double fr, double& value) {

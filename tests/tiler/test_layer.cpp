@@ -32,6 +32,69 @@ std::shared_ptr<const Layer> open_layer(std::vector<std::string> sources,
     return Layer::open(options);
 }
 
+// A pixel centre or border point of grid g in lon/lat.
+LonLat lonlat_of(const PixelGrid& g, Scheme scheme, double x, double y) {
+    return g.lonlat ? LonLat{x, y} : native_to_lonlat(scheme, x, y);
+}
+
+// The block of two pixel tiles of fixture f, one made for an EGM96 source and one for an
+// ellipsoidal one: at every valid pixel the first holds the source's height plus
+// egm96_undulation at its centre, the second the source's own, bit for bit. Returns the pixels
+// checked.
+std::size_t check_tile_pixels(const Fixture& f,
+                              const PixelGrid& g,
+                              Scheme scheme,
+                              const PixelTile& egm,
+                              const PixelTile& ell) {
+    const tb::core::HeightGrid& a = egm.raster.grid;
+    std::size_t checked = 0;
+    for (int j = 0; j < a.height; ++j) {
+        for (int i = 0; i < a.width; ++i) {
+            const std::int64_t gi = egm.column0 + i, gj = egm.row0 + j;
+            const double v = f.values[static_cast<std::size_t>(gj * f.width + gi)];
+            if (v == *f.nodata) {
+                CHECK_FALSE(a.is_valid(i, j));
+                continue;
+            }
+            const LonLat p = lonlat_of(g, scheme, g.x(gi), g.y(gj));
+            REQUIRE(a.is_valid(i, j));
+            CHECK(a.at(i, j) == static_cast<float>(v + egm96_undulation(p.lon, p.lat)));
+            CHECK(ell.raster.grid.at(i, j) == static_cast<float>(v));
+            ++checked;
+        }
+    }
+    return checked;
+}
+
+// The border lines between the same two tiles and their neighbours: a mean of the source's own
+// heights beside the line, plus the undulation there for the EGM96 source, and not for the
+// ellipsoidal one (whose void filling moves its window to the geoid). Returns the points
+// checked.
+std::size_t
+check_tile_borders(const PixelGrid& g, Scheme scheme, const PixelTile& egm, const PixelTile& ell) {
+    std::size_t checked = 0;
+    for (int side = 0; side < 4; ++side) {
+        const BorderProfile& pe = egm.sides[static_cast<std::size_t>(side)];
+        const BorderProfile& pl = ell.sides[static_cast<std::size_t>(side)];
+        REQUIRE(pe.present == pl.present);
+        REQUIRE(pe.heights.size() == pl.heights.size());
+        const bool vertical = side == kWest || side == kEast;
+        const double line = egm.edge[static_cast<std::size_t>(side)]; // x west/east, y north/south
+        for (std::size_t k = 0; k < pe.heights.size(); ++k) {
+            if (!pe.valid[k]) {
+                continue;
+            }
+            const auto along = static_cast<std::int64_t>(k);
+            const LonLat p = vertical ? lonlat_of(g, scheme, line, g.y(egm.row0 + along))
+                                      : lonlat_of(g, scheme, g.x(egm.column0 + along), line);
+            CHECK(double(pe.heights[k]) - double(pl.heights[k]) ==
+                  doctest::Approx(egm96_undulation(p.lon, p.lat)).epsilon(1e-5));
+            ++checked;
+        }
+    }
+    return checked;
+}
+
 } // namespace
 
 TEST_CASE("an SRTM cell gets zooms 7..10, a doubling eps ladder and consistent tile sets") {
@@ -120,81 +183,38 @@ TEST_CASE("a pixel tile holds each source pixel plus the EGM96 undulation at its
         return;
     }
     ScratchDir dir;
-    const auto check = [&](const std::string& name, int epsg, std::array<double, 6> gt,
-                           Scheme scheme) {
-        Fixture f;
+    const auto check = [&](const std::string& name, Fixture f, Scheme scheme) {
         f.width = 300, f.height = 240;
         f.type = GDT_Float64;
-        f.epsg = epsg;
-        f.geotransform = gt;
         f.nodata = -9999;
         for (int j = 0; j < f.height; ++j) {
             for (int i = 0; i < f.width; ++i) {
-                f.values.push_back((i * 7 + j * 3) % 41 == 0 ? -9999.0
-                                                             : 800 + 90 * std::sin(i * 0.31) +
-                                                                   40 * std::cos(j * 0.17) + i * 1e-7);
+                const bool void_pixel = (i * 7 + j * 3) % 41 == 0;
+                f.values.push_back(void_pixel ? -9999.0
+                                              : 800 + 90 * std::sin(i * 0.31) +
+                                                    40 * std::cos(j * 0.17) + i * 1e-7);
             }
         }
         const std::string path = tb_test::write_fixture(dir.file(name), f);
         const auto source = DemSource::open({path});
         const std::optional<PixelGrid> g = source->pixel_grid(scheme);
         REQUIRE(g.has_value());
-        const auto layer = open_layer({path}, scheme, VerticalDatum::Egm96);
+        const auto layer = open_layer({path}, scheme);
         const int z = layer->max_zoom();
         const TileRange r = layer->tiles_at(z);
         std::size_t pixels = 0, profiles = 0;
         for (std::int64_t x = r.x0; x <= r.x1; ++x) {
             for (std::int64_t y = r.y0; y <= r.y1; ++y) {
-                const TileId tile{z, x, y};
-                PixelTile egm, ell;
                 try {
-                    egm = make_pixel_tile(*source, *g, scheme, tile, VerticalDatum::Egm96);
-                    ell = make_pixel_tile(*source, *g, scheme, tile, VerticalDatum::Ellipsoid);
+                    const TileId id{z, x, y};
+                    const PixelTile egm =
+                        make_pixel_tile(*source, *g, scheme, id, VerticalDatum::Egm96);
+                    const PixelTile ell =
+                        make_pixel_tile(*source, *g, scheme, id, VerticalDatum::Ellipsoid);
+                    pixels += check_tile_pixels(f, *g, scheme, egm, ell);
+                    profiles += check_tile_borders(*g, scheme, egm, ell);
                 } catch (const tb::NotFound&) {
-                    continue;
-                }
-                const tb::core::HeightGrid& a = egm.raster.grid;
-                for (int j = 0; j < a.height; ++j) {
-                    for (int i = 0; i < a.width; ++i) {
-                        const std::int64_t gi = egm.column0 + i, gj = egm.row0 + j;
-                        const double v = f.values[static_cast<std::size_t>(gj * f.width + gi)];
-                        if (v == -9999.0) {
-                            CHECK_FALSE(a.is_valid(i, j));
-                            continue;
-                        }
-                        const LonLat p = g->lonlat ? LonLat{g->x(gi), g->y(gj)}
-                                                   : native_to_lonlat(scheme, g->x(gi), g->y(gj));
-                        REQUIRE(a.is_valid(i, j));
-                        CHECK(a.at(i, j) == static_cast<float>(v + egm96_undulation(p.lon, p.lat)));
-                        CHECK(ell.raster.grid.at(i, j) == static_cast<float>(v));
-                        ++pixels;
-                    }
-                }
-                // Between two tiles the border line's heights are a mean of the source's own
-                // heights beside it: the undulation there is added for an EGM96 source and not
-                // for an ellipsoidal one (whose void filling moves its window to the geoid).
-                for (int side = 0; side < 4; ++side) {
-                    const BorderProfile& pe = egm.sides[static_cast<std::size_t>(side)];
-                    const BorderProfile& pl = ell.sides[static_cast<std::size_t>(side)];
-                    REQUIRE(pe.present == pl.present);
-                    REQUIRE(pe.heights.size() == pl.heights.size());
-                    const double line_x =
-                        side == kWest ? egm.edge[0] : side == kEast ? egm.edge[1] : 0;
-                    const double line_y =
-                        side == kNorth ? egm.edge[2] : side == kSouth ? egm.edge[3] : 0;
-                    for (std::size_t k = 0; k < pe.heights.size(); ++k) {
-                        if (!pe.valid[k]) {
-                            continue;
-                        }
-                        const auto along = static_cast<std::int64_t>(k);
-                        const double px = side <= kEast ? line_x : g->x(egm.column0 + along);
-                        const double py = side <= kEast ? g->y(egm.row0 + along) : line_y;
-                        const LonLat p =
-                            g->lonlat ? LonLat{px, py} : native_to_lonlat(scheme, px, py);
-                        CHECK(double(pe.heights[k]) - double(pl.heights[k]) ==
-                              doctest::Approx(egm96_undulation(p.lon, p.lat)).epsilon(1e-5));
-                        ++profiles;
-                    }
+                    // no pixel centre in this tile
                 }
             }
         }
@@ -202,8 +222,14 @@ TEST_CASE("a pixel tile holds each source pixel plus the EGM96 undulation at its
         CHECK(profiles > 40);
     };
     // 0.001 degree pixels near 8 E, 46 N; 60 m EPSG:3857 pixels there.
-    check("geodetic.tif", 4326, {8.0, 0.001, 0, 46.06, 0, -0.001}, Scheme::Geodetic);
-    check("mercator.tif", 3857, {890555.9, 60.0, 0, 5780000.0, 0, -60.0}, Scheme::Mercator);
+    Fixture geodetic;
+    geodetic.epsg = 4326;
+    geodetic.geotransform = std::array<double, 6>{8.0, 0.001, 0, 46.06, 0, -0.001};
+    check("geodetic.tif", geodetic, Scheme::Geodetic);
+    Fixture mercator;
+    mercator.epsg = 3857;
+    mercator.geotransform = std::array<double, 6>{890555.9, 60.0, 0, 5780000.0, 0, -60.0};
+    check("mercator.tif", mercator, Scheme::Mercator);
 }
 
 TEST_CASE("a raster without georeferencing or without data cannot be tiled, with clear errors") {

@@ -776,9 +776,8 @@ std::string encode_tile(const TileRaster& raster,
     TB_ASSERT(n >= 3);
     TB_ASSERT(budget.quant_step > 0 && budget.eps > 0);
     check_lattice_fits(raster, budget);
-    // With two threads the Draco encoding of the first lattice runs beside the check of the
-    // drawn surface (see below), and the normals made on demand, which need the mesh alone,
-    // start now, beside the positions and the lattice, instead of ahead of that encoding.
+    // Where the Draco encoding runs beside the check (speculate; see below), the normals made
+    // on demand, which need the mesh alone, start now, beside the positions and the lattice.
     const bool speculate = threads >= 2 && (format == Format::Glb || points.empty());
     Beside<std::vector<std::array<double, 3>>> normals_ahead;
     if (normals == nullptr && make_normals && speculate) {

@@ -407,7 +407,8 @@ TileMesh mesh_pixel_tile(
             2,
             threads,
             run_on_helper);
-        index.reserve(mesh.points.size() + 2 * static_cast<std::size_t>(w + h) / 4 + 8);
+        // The block's vertices, and room for those the border lines add.
+        index.reserve(mesh.points.size() + static_cast<std::size_t>(w + h) / 2);
         std::vector<core::Index> id(mesh.points.size());
         for (std::size_t v = 0; v < mesh.points.size(); ++v) {
             const core::GridPoint p = mesh.points[v];
