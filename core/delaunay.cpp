@@ -2,6 +2,8 @@
 // computed in the x-y image plane." Incremental insertion with Lawson flips, exact integers.
 #include "core/delaunay.hpp"
 
+#include <algorithm>
+
 #include "core/error.hpp"
 #include "core/predicates.hpp"
 
@@ -80,8 +82,12 @@ void legalize(Tin& tin, Index p, std::vector<Index>& stack) {
 
 } // namespace
 
-Tin delaunay_rectangle(int width, int height, const std::vector<GridPoint>& points) {
+Tin delaunay_rectangle(int width,
+                       int height,
+                       const std::vector<GridPoint>& points,
+                       std::size_t room) {
     Tin tin = Tin::rectangle(width, height);
+    tin.reserve(std::max(room, points.size() + 4));
     std::vector<Index> stack;
     std::array<Index, 4> around{};
     Index last = 0;

@@ -22,7 +22,11 @@ Location locate(const Tin& tin, GridPoint p, Index start);
 // (and its neighbour), then Lawson flips restore the empty-circle property. Cocircular points
 // keep whatever diagonal they have, so the result is one of the Delaunay triangulations and is
 // deterministic for a given input order. Every triangle has positive area; the border is
-// exactly the rectangle.
-Tin delaunay_rectangle(int width, int height, const std::vector<GridPoint>& points);
+// exactly the rectangle. The result's arrays have room for `room` vertices (Tin::reserve), at
+// least for its own.
+Tin delaunay_rectangle(int width,
+                       int height,
+                       const std::vector<GridPoint>& points,
+                       std::size_t room = 0);
 
 } // namespace tb::core

@@ -16,6 +16,7 @@
 #include <cmath>
 
 #include "core/error.hpp"
+#include "core/memory.hpp"
 #include "core/polygon_dp.hpp"
 #include "core/predicates.hpp"
 #include "core/refiner.hpp"
@@ -304,9 +305,9 @@ std::size_t Refiner::merge_pass() {
     const std::size_t nv = tin_.points.size();
     dirty_.resize(nv, 1);
     // The error points around each vertex, when there are any.
-    std::vector<std::int64_t> error_points;
+    LargeVector<std::int64_t> error_points;
     if (error_points_ != 0) {
-        error_points.assign(nv, 0);
+        error_points = large_vector<std::int64_t>(nv, 0);
         for (Index t = 0; t < tin_.triangle_slots(); ++t) {
             if (tin_.alive(t)) {
                 for (Index e = 3 * t; e < 3 * t + 3; ++e) {
@@ -317,7 +318,8 @@ std::size_t Refiner::merge_pass() {
     }
     // Vertices tried before and untouched since (dirty_ == 0) are left out: their removal
     // would fail the same way.
-    std::vector<Candidate> order;
+    LargeVector<Candidate> order;
+    order.reserve(nv);
     for (Index v = 0; v < nv; ++v) {
         const GridPoint p = tin_.points[v];
         const bool border =

@@ -17,6 +17,11 @@ namespace tb::core {
 
 class Refiner {
 public:
+    // Room reserved for the split agent's vertices, as a multiple of the start's. The split
+    // agent ends with 1.6-2.6 times the anchors on bench/mesh_bench.sh's cases; beyond the
+    // room the arrays grow as vectors do.
+    static constexpr std::size_t kGrowth = 4;
+
     // Takes the initial triangulation (§3.1) and scans every triangle. grid must outlive the
     // refiner (it is kept by reference); eps > 0; max_edge 0 (no limit) or >= kMinMaxEdge,
     // and with lock_border the border edges of tin already within max_edge.
@@ -66,14 +71,14 @@ private:
     double max_edge_;
     std::int64_t max_edge2_floor_; // the largest integer squared length <= max_edge^2
     Tin tin_;
-    std::vector<TriangleStats> stats_;
+    LargeVector<TriangleStats> stats_;
     SplitQueue queue_; // every live triangle with error points
     // Triangles that may have an edge over max_edge: (squared longest edge, -t), longest first.
     // Entries go stale when t changes; a changed triangle is always pushed again.
     std::priority_queue<std::pair<std::int64_t, std::int64_t>> long_queue_;
     std::int64_t error_points_ = 0;
     // Vertex v's neighbourhood changed since the merge agent last failed to remove it.
-    std::vector<std::uint8_t> dirty_;
+    LargeVector<std::uint8_t> dirty_;
     // Working memory of try_remove, kept to save allocations.
     struct MergeScratch {
         std::vector<Index> poly;

@@ -47,6 +47,14 @@ std::int64_t max_length2(double max_edge) {
 Refiner::Refiner(const HeightGrid& grid, double eps, bool lock_border, double max_edge, Tin tin)
     : grid_(grid), eps_(eps), lock_border_(lock_border), max_edge_(max_edge),
       max_edge2_floor_(max_length2(max_edge)), tin_(std::move(tin)) {
+    // The split agent adds vertices to the start's anchors: room for kGrowth times as many, so
+    // that the arrays do not move as they grow (for the triangulation's own a no-op when the
+    // start was built with that room, as triangulate() does).
+    const std::size_t room = kGrowth * tin_.points.size();
+    tin_.reserve(room);
+    stats_.reserve(2 * room);
+    dirty_.reserve(room);
+    queue_.reserve(2 * room);
     for (Index t = 0; t < tin_.triangle_slots(); ++t) {
         if (tin_.alive(t)) {
             set_stats(t, scan(t));
@@ -55,12 +63,10 @@ Refiner::Refiner(const HeightGrid& grid, double eps, bool lock_border, double ma
 }
 
 void Refiner::compact() {
-    const std::vector<Index> old_of = tin_.compact();
-    std::vector<TriangleStats> stats(old_of.size());
-    for (Index t = 0; t < old_of.size(); ++t) {
-        stats[t] = stats_[old_of[t]];
-    }
-    stats_ = std::move(stats);
+    // Every slot has stats (a freed one empty ones); they move with their triangles.
+    stats_.resize(tin_.triangle_slots());
+    tin_.compact([this](Index a, Index b) { std::swap(stats_[a], stats_[b]); });
+    stats_.resize(tin_.triangle_slots());
     dirty_.assign(tin_.points.size(), 1);
     queue_.clear();
     long_queue_ = {};

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "core/memory.hpp"
 #include "core/mesh.hpp"
 
 namespace tb::core {
@@ -13,6 +14,12 @@ namespace tb::core {
 class SplitQueue {
 public:
     bool empty() const { return heap_.empty(); }
+
+    // Room for triangles numbered below n, all queued at once, without moving (memory.hpp).
+    void reserve(std::size_t n) {
+        heap_.reserve(n);
+        pos_.reserve(n);
+    }
 
     // The triangle to split next: most error points, then the largest share of error points
     // among its samples, then the largest total error, then the lowest index. The order is
@@ -118,8 +125,8 @@ private:
         put(i, e);
     }
 
-    std::vector<Entry> heap_;
-    std::vector<std::uint32_t> pos_; // triangle -> its heap slot + 1; 0 when absent
+    LargeVector<Entry> heap_;
+    LargeVector<std::uint32_t> pos_; // triangle -> its heap slot + 1; 0 when absent
 };
 
 } // namespace tb::core

@@ -20,6 +20,13 @@ Tin Tin::rectangle(int width, int height) {
     return tin;
 }
 
+void Tin::reserve(std::size_t vertices) {
+    points.reserve(vertices);
+    vertex_edge.reserve(vertices);
+    triangles.reserve(6 * vertices);
+    halfedges.reserve(6 * vertices);
+}
+
 Index Tin::add_point(GridPoint p) {
     points.push_back(p);
     vertex_edge.push_back(kNone);
@@ -199,24 +206,48 @@ std::uint64_t z_order_key(GridPoint p) {
            (spread_bits(static_cast<std::uint32_t>(p.y)) << 1);
 }
 
-std::vector<Index> Tin::compact() {
+namespace {
+
+// Moves the record in every slot i to slot to[i] (`to` a permutation of its indices) by swaps
+// along the permutation's cycles, each of which puts one record in its final slot. No second
+// array: on this path the arrays are the mesher's largest, and fresh memory is what a copy
+// would cost most. `to` is left as the identity.
+template <typename Swap> void permute_in_place(LargeVector<Index>& to, const Swap& swap_records) {
+    for (Index i = 0; i < to.size(); ++i) {
+        while (to[i] != i) {
+            const Index j = to[i];
+            swap_records(i, j);
+            std::swap(to[i], to[j]);
+        }
+    }
+}
+
+} // namespace
+
+void Tin::compact(const std::function<void(Index, Index)>& swap_also) {
     // Vertices by the Z-order of their position (unique, so the order is total).
-    std::vector<std::pair<std::uint64_t, Index>> keys;
+    LargeVector<std::pair<std::uint64_t, Index>> keys;
+    keys.reserve(points.size());
     for (Index v = 0; v < points.size(); ++v) {
         if (vertex_edge[v] != kNone) {
             keys.push_back({z_order_key(points[v]), v});
         }
     }
     std::sort(keys.begin(), keys.end());
-    std::vector<Index> vmap(points.size(), kNone);
-    std::vector<GridPoint> new_points(keys.size());
+    // New vertex numbers: the live ones in that order, then the removed ones (dropped below).
+    LargeVector<Index> vmap = large_vector(points.size(), kNone);
     for (Index i = 0; i < keys.size(); ++i) {
         vmap[keys[i].second] = i;
-        new_points[i] = points[keys[i].second];
     }
-    // Triangles by their lowest new vertex (a counting sort; ties keep slot order).
-    std::vector<Index> first(points.size() + 1, 0);
-    std::vector<Index> lowest(triangle_slots(), kNone);
+    const auto live_vertices = static_cast<Index>(keys.size());
+    Index next = live_vertices;
+    for (Index& v : vmap) {
+        v = v == kNone ? next++ : v;
+    }
+    // Triangles by their lowest new vertex (a counting sort; ties keep slot order), then the
+    // freed slots.
+    LargeVector<Index> first = large_vector<Index>(points.size() + 1, 0);
+    LargeVector<Index> lowest = large_vector(triangle_slots(), kNone);
     for (Index t = 0; t < triangle_slots(); ++t) {
         if (alive(t)) {
             lowest[t] = std::min(
@@ -227,28 +258,37 @@ std::vector<Index> Tin::compact() {
     for (std::size_t v = 1; v < first.size(); ++v) {
         first[v] += first[v - 1];
     }
-    std::vector<Index> tmap(triangle_slots(), kNone);
-    std::vector<Index> old_of(first.back());
+    const Index live_triangles = first.back();
+    LargeVector<Index> tmap = large_vector(triangle_slots(), kNone);
+    next = live_triangles;
     for (Index t = 0; t < triangle_slots(); ++t) {
-        if (lowest[t] != kNone) {
-            const Index i = first[lowest[t]]++;
-            tmap[t] = i;
-            old_of[i] = t;
+        tmap[t] = lowest[t] != kNone ? first[lowest[t]]++ : next++;
+    }
+    // Renumber the references first, then move the records.
+    for (Index t = 0; t < triangle_slots(); ++t) {
+        if (!alive(t)) {
+            continue;
+        }
+        for (Index e = 3 * t; e < 3 * t + 3; ++e) {
+            triangles[e] = vmap[triangles[e]];
+            const Index twin = halfedges[e];
+            halfedges[e] = twin == kNone ? kNone : 3 * tmap[twin / 3] + twin % 3;
         }
     }
-    std::vector<Index> new_triangles(3 * old_of.size());
-    std::vector<Index> new_halfedges(3 * old_of.size());
-    for (Index i = 0; i < old_of.size(); ++i) {
-        const Index t = old_of[i];
+    permute_in_place(tmap, [&](Index a, Index b) {
         for (Index k = 0; k < 3; ++k) {
-            new_triangles[3 * i + k] = vmap[triangles[3 * t + k]];
-            const Index twin = halfedges[3 * t + k];
-            new_halfedges[3 * i + k] = twin == kNone ? kNone : 3 * tmap[twin / 3] + twin % 3;
+            std::swap(triangles[3 * a + k], triangles[3 * b + k]);
+            std::swap(halfedges[3 * a + k], halfedges[3 * b + k]);
         }
-    }
-    points = std::move(new_points);
-    triangles = std::move(new_triangles);
-    halfedges = std::move(new_halfedges);
+        if (swap_also) {
+            swap_also(a, b);
+        }
+    });
+    permute_in_place(vmap, [&](Index a, Index b) { std::swap(points[a], points[b]); });
+    // Shrinking keeps the capacity: room reserved for growth stays.
+    points.resize(live_vertices);
+    triangles.resize(3 * std::size_t{live_triangles});
+    halfedges.resize(3 * std::size_t{live_triangles});
     free_triangles.clear();
     vertex_edge.assign(points.size(), kNone);
     for (Index e = 0; e < triangles.size(); ++e) {
@@ -256,19 +296,22 @@ std::vector<Index> Tin::compact() {
             vertex_edge[triangles[e]] = e;
         }
     }
-    return old_of;
 }
 
 Mesh Tin::to_mesh(const std::vector<float>& heights, int width) const {
     Mesh mesh;
-    std::vector<Index> vmap(points.size(), kNone);
-    std::vector<Index> tmap(triangle_slots(), kNone);
+    LargeVector<Index> vmap = large_vector(points.size(), kNone);
+    LargeVector<Index> tmap = large_vector(triangle_slots(), kNone);
     Index nt = 0;
     for (Index t = 0; t < triangle_slots(); ++t) {
         if (alive(t)) {
             tmap[t] = nt++;
         }
     }
+    mesh.points.reserve(points.size());
+    mesh.z.reserve(points.size());
+    mesh.triangles.reserve(3 * std::size_t{nt});
+    mesh.halfedges.reserve(3 * std::size_t{nt});
     mesh.triangles.resize(3 * std::size_t{nt});
     mesh.halfedges.resize(3 * std::size_t{nt});
     for (Index t = 0; t < triangle_slots(); ++t) {

@@ -4,18 +4,20 @@
 // of Lu & Yun §3.3-3.4 (split a triangle, split an edge, swap a diagonal, replace a fan).
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <utility>
 #include <vector>
 
+#include "core/memory.hpp"
 #include "core/mesh.hpp"
 
 namespace tb::core {
 
 struct Tin {
-    std::vector<GridPoint> points;  // vertex v
-    std::vector<Index> triangles;   // half-edge e -> start vertex; kNone for a freed triangle
-    std::vector<Index> halfedges;   // twin of e, or kNone on the border
-    std::vector<Index> vertex_edge; // vertex v -> a half-edge starting at v; kNone if removed
+    LargeVector<GridPoint> points;  // vertex v
+    LargeVector<Index> triangles;   // half-edge e -> start vertex; kNone for a freed triangle
+    LargeVector<Index> halfedges;   // twin of e, or kNone on the border
+    LargeVector<Index> vertex_edge; // vertex v -> a half-edge starting at v; kNone if removed
     std::vector<Index> free_triangles;
 
     // The rectangle [0,w-1] x [0,h-1] as two triangles; vertices 0..3 are its corners.
@@ -26,6 +28,10 @@ struct Tin {
     GridPoint start(Index e) const { return points[triangles[e]]; }
 
     Index add_point(GridPoint p);
+
+    // Room for `vertices` vertices and twice as many triangles without moving any array
+    // (memory.hpp): growth then neither copies nor moves to fresh memory.
+    void reserve(std::size_t vertices);
 
     // Splits triangle t by the new vertex p lying strictly inside it. Writes the three
     // triangles around p (t reused first) to out.
@@ -63,9 +69,10 @@ struct Tin {
     bool on_border(Index v) const;
 
     // Renumbers the live vertices and triangles along a Z-order curve (removed ones dropped,
-    // free list emptied), so that neighbours in the plane are neighbours in memory. Returns
-    // the old index of each new triangle.
-    std::vector<Index> compact();
+    // free list emptied), so that neighbours in the plane are neighbours in memory. In place:
+    // the arrays keep their capacity. swap_also(a, b) is called whenever the triangles in
+    // slots a and b trade places, so that a caller's data per triangle can follow them.
+    void compact(const std::function<void(Index, Index)>& swap_also = {});
 
     // The live triangles in order, with vertices renumbered compactly (removed ones dropped).
     Mesh to_mesh(const std::vector<float>& heights, int width) const;

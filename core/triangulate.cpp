@@ -12,6 +12,7 @@
 #include "core/breakpoints.hpp"
 #include "core/delaunay.hpp"
 #include "core/error.hpp"
+#include "core/memory.hpp"
 #include "core/refiner.hpp"
 
 namespace tb::core {
@@ -73,9 +74,13 @@ void check_input(const HeightGrid& grid, const TriangulateOptions& options) {
 
 Mesh triangulate(const HeightGrid& grid, const TriangulateOptions& options) {
     check_input(grid, options);
+    const HugePages huge_pages(options.huge_pages);
     const double eps = options.eps;
     const int max_step = max_step_for(options.max_edge);
-    Tin start = delaunay_rectangle(grid.width, grid.height, anchor_points(grid, eps, max_step));
+    const std::vector<GridPoint> anchors = anchor_points(grid, eps, max_step);
+    // With room for the split agent's vertices (Refiner::kGrowth), which compact() keeps.
+    Tin start = delaunay_rectangle(
+        grid.width, grid.height, anchors, Refiner::kGrowth * (anchors.size() + 4));
     start.compact(); // triangles in Z-order, so the split agent's rescans stay local
     Refiner refiner(grid, eps, options.lock_border, options.max_edge, std::move(start));
     refiner.split_until_clean();

@@ -1065,9 +1065,10 @@ mesh_tile(const TileRaster& raster, const ErrorBudget& budget, int threads, bool
     // Two strips on two threads: a tile requested cold is ready in about 60 % of the time for
     // 0.1-0.7 % more triangles (the cut column is a locked border, as between two tiles).
     constexpr int kStrips = 2;
+    // Small pages: many tiles are meshed at once (core::TriangulateOptions::huge_pages).
     return core::triangulate_strips(
         raster.grid,
-        core::TriangulateOptions{budget.mesh_eps, true, budget.max_edge, check_error},
+        core::TriangulateOptions{budget.mesh_eps, true, budget.max_edge, check_error, false},
         kStrips,
         threads,
         run_on_helper);

@@ -401,9 +401,10 @@ TileMesh mesh_pixel_tile(
     // The block: core's mesh, or for a block one pixel thin the optimal fit of its one line.
     std::vector<int> inner[4]; // positions along each side of the block, increasing
     if (w >= 2 && h >= 2) {
+        // Small pages: many tiles are meshed at once (core::TriangulateOptions::huge_pages).
         const core::Mesh mesh = core::triangulate_strips(
             grid,
-            core::TriangulateOptions{budget.mesh_eps, true, core_edge, check_error},
+            core::TriangulateOptions{budget.mesh_eps, true, core_edge, check_error, false},
             2,
             threads,
             run_on_helper);
