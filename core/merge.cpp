@@ -318,8 +318,12 @@ std::size_t Refiner::merge_pass() {
     }
     // Vertices tried before and untouched since (dirty_ == 0) are left out: their removal
     // would fail the same way.
-    LargeVector<Candidate> order;
-    order.reserve(nv);
+    LargeVector<Index> visit;
+    visit.reserve(nv);
+    // After compact() the vertices are numbered along the Z-order curve, and a clean mesh's
+    // merge passes add none: the list is then already in order, found so in the same pass.
+    bool in_order = error_points.empty();
+    std::uint64_t last_key = 0;
     for (Index v = 0; v < nv; ++v) {
         const GridPoint p = tin_.points[v];
         const bool border =
@@ -327,22 +331,33 @@ std::size_t Refiner::merge_pass() {
         if (tin_.vertex_edge[v] == kNone || dirty_[v] == 0 || (lock_border_ && border)) {
             continue;
         }
-        const std::int64_t points = error_points.empty() ? 0 : error_points[v];
-        order.push_back({static_cast<std::uint64_t>(points), z_order_key(p), v});
+        if (in_order) {
+            const std::uint64_t key = z_order_key(p);
+            in_order = visit.empty() || key > last_key;
+            last_key = key;
+        }
+        visit.push_back(v);
     }
-    // After compact() the vertices are numbered along the Z-order curve, and a clean mesh's
-    // merge passes add none: the list is then already in order, and checking costs one pass.
-    if (!std::is_sorted(order.begin(), order.end())) {
+    if (!in_order) {
+        LargeVector<Candidate> order;
+        order.reserve(visit.size());
+        for (Index v : visit) {
+            const std::int64_t points = error_points.empty() ? 0 : error_points[v];
+            order.push_back({static_cast<std::uint64_t>(points), z_order_key(tin_.points[v]), v});
+        }
         std::sort(order.begin(), order.end());
+        for (std::size_t i = 0; i < order.size(); ++i) {
+            visit[i] = order[i].v;
+        }
     }
     std::vector<Index> ring;
     std::size_t removed = 0;
-    for (const Candidate& c : order) {
-        if (tin_.vertex_edge[c.v] == kNone || dirty_[c.v] == 0) {
+    for (Index v : visit) {
+        if (tin_.vertex_edge[v] == kNone || dirty_[v] == 0) {
             continue;
         }
-        dirty_[c.v] = 0;
-        if (try_remove(c.v, ring)) {
+        dirty_[v] = 0;
+        if (try_remove(v, ring)) {
             ++removed;
         }
     }

@@ -246,13 +246,14 @@ void Tin::compact(const std::function<void(Index, Index)>& swap_also) {
     }
     // Triangles by their lowest new vertex (a counting sort; ties keep slot order), then the
     // freed slots.
+    const auto lowest = [&](Index t) {
+        return std::min(
+            {vmap[triangles[3 * t]], vmap[triangles[3 * t + 1]], vmap[triangles[3 * t + 2]]});
+    };
     LargeVector<Index> first = large_vector<Index>(points.size() + 1, 0);
-    LargeVector<Index> lowest = large_vector(triangle_slots(), kNone);
     for (Index t = 0; t < triangle_slots(); ++t) {
         if (alive(t)) {
-            lowest[t] = std::min(
-                {vmap[triangles[3 * t]], vmap[triangles[3 * t + 1]], vmap[triangles[3 * t + 2]]});
-            ++first[lowest[t] + 1];
+            ++first[lowest(t) + 1];
         }
     }
     for (std::size_t v = 1; v < first.size(); ++v) {
@@ -262,7 +263,7 @@ void Tin::compact(const std::function<void(Index, Index)>& swap_also) {
     LargeVector<Index> tmap = large_vector(triangle_slots(), kNone);
     next = live_triangles;
     for (Index t = 0; t < triangle_slots(); ++t) {
-        tmap[t] = lowest[t] != kNone ? first[lowest[t]]++ : next++;
+        tmap[t] = alive(t) ? first[lowest(t)]++ : next++;
     }
     // Renumber the references first, then move the records.
     for (Index t = 0; t < triangle_slots(); ++t) {
