@@ -26,16 +26,17 @@ HugePages::~HugePages() {
 
 void* allocate_large(std::size_t bytes) {
     void* data = nullptr;
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
     if (huge_pages && bytes >= kHugePage) {
         const std::size_t rounded = (bytes + kHugePage - 1) / kHugePage * kHugePage;
         data = std::aligned_alloc(kHugePage, rounded);
-#if defined(__linux__) && defined(MADV_HUGEPAGE)
         if (data != nullptr) {
             // A hint: without transparent huge pages the pages stay small.
             (void)madvise(data, rounded, MADV_HUGEPAGE);
         }
+    }
 #endif
-    } else {
+    if (data == nullptr) {
         data = std::malloc(bytes);
     }
     if (data == nullptr) {

@@ -17,7 +17,9 @@ void free_large(void* data) noexcept;
 // While a HugePages scope with `on` lives on a thread, allocate_large backs the arrays of 2 MiB
 // and more made on that thread with huge pages (Linux madvise MADV_HUGEPAGE; elsewhere nothing).
 // Outside any scope it does not. A huge page is committed whole once touched, so an array wastes
-// up to 2 MiB at its end: worth it for one large mesh, not for many small ones at once.
+// up to 2 MiB at its end: worth it for one large mesh, not for many small ones at once. (The
+// hint stays on the address range after the array is freed, for whatever the heap puts there
+// next.)
 class HugePages {
 public:
     explicit HugePages(bool on);
@@ -36,7 +38,10 @@ template <typename T> struct LargeAllocator {
     template <typename U> LargeAllocator(const LargeAllocator<U>&) noexcept {}
     T* allocate(std::size_t n) { return static_cast<T*>(allocate_large(n * sizeof(T))); }
     void deallocate(T* data, std::size_t) noexcept { free_large(data); }
-    friend bool operator==(const LargeAllocator&, const LargeAllocator&) { return true; }
+    template <typename U>
+    friend bool operator==(const LargeAllocator&, const LargeAllocator<U>&) noexcept {
+        return true;
+    }
 };
 
 template <typename T> using LargeVector = std::vector<T, LargeAllocator<T>>;

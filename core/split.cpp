@@ -53,7 +53,7 @@ Refiner::Refiner(const HeightGrid& grid, double eps, bool lock_border, double ma
     const std::size_t room = kGrowth * tin_.points.size();
     tin_.reserve(room);
     stats_.reserve(2 * room);
-    dirty_.reserve(room);
+    dirty_.reserve(room + room / 2); // set_stats grows it by half at a time
     queue_.reserve(2 * room);
     for (Index t = 0; t < tin_.triangle_slots(); ++t) {
         if (tin_.alive(t)) {

@@ -271,6 +271,7 @@ void Tin::compact(const std::function<void(Index, Index)>& swap_also) {
             continue;
         }
         for (Index e = 3 * t; e < 3 * t + 3; ++e) {
+            TB_ASSERT(vertex_edge[triangles[e]] != kNone); // a live triangle's vertices are live
             triangles[e] = vmap[triangles[e]];
             const Index twin = halfedges[e];
             halfedges[e] = twin == kNone ? kNone : 3 * tmap[twin / 3] + twin % 3;
@@ -311,8 +312,6 @@ Mesh Tin::to_mesh(const std::vector<float>& heights, int width) const {
     }
     mesh.points.reserve(points.size());
     mesh.z.reserve(points.size());
-    mesh.triangles.reserve(3 * std::size_t{nt});
-    mesh.halfedges.reserve(3 * std::size_t{nt});
     mesh.triangles.resize(3 * std::size_t{nt});
     mesh.halfedges.resize(3 * std::size_t{nt});
     for (Index t = 0; t < triangle_slots(); ++t) {

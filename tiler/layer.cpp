@@ -1068,7 +1068,11 @@ mesh_tile(const TileRaster& raster, const ErrorBudget& budget, int threads, bool
     // Small pages: many tiles are meshed at once (core::TriangulateOptions::huge_pages).
     return core::triangulate_strips(
         raster.grid,
-        core::TriangulateOptions{budget.mesh_eps, true, budget.max_edge, check_error, false},
+        core::TriangulateOptions{.eps = budget.mesh_eps,
+                                 .lock_border = true,
+                                 .max_edge = budget.max_edge,
+                                 .check_error = check_error,
+                                 .huge_pages = false},
         kStrips,
         threads,
         run_on_helper);

@@ -404,7 +404,11 @@ TileMesh mesh_pixel_tile(
         // Small pages: many tiles are meshed at once (core::TriangulateOptions::huge_pages).
         const core::Mesh mesh = core::triangulate_strips(
             grid,
-            core::TriangulateOptions{budget.mesh_eps, true, core_edge, check_error, false},
+            core::TriangulateOptions{.eps = budget.mesh_eps,
+                                     .lock_border = true,
+                                     .max_edge = core_edge,
+                                     .check_error = check_error,
+                                     .huge_pages = false},
             2,
             threads,
             run_on_helper);
