@@ -24,7 +24,7 @@ struct TriangulateOptions {
     // when full scans of its new triangles find none.
     bool check_error = true;
     // Whether the mesher's arrays of 2 MiB and more take transparent huge pages (memory.hpp):
-    // fewer page faults for one large mesh (fuji-513 eps 6: a tenth of its time on a virtual
+    // fewer page faults for one large mesh (fuji-513 eps 6: 5-7 % of its time on a virtual
     // machine), but up to 2 MiB unused at the end of each array. Off for many small meshes at
     // once: the tiler's strips, where it raised the peak memory of `build` by a quarter.
     bool huge_pages = true;
