@@ -85,8 +85,7 @@ double max_error(const Mesh& mesh, const HeightGrid& grid) {
     // Every triangle is scanned over its closed area, so a sample on an edge is judged by every
     // triangle that touches it; a valid sample covered by none makes the error infinite.
     const int w = grid.width;
-    LargeVector<std::uint8_t> covered =
-        large_vector<std::uint8_t>(static_cast<std::size_t>(w) * grid.height, 0);
+    LargeVector<std::uint8_t> covered(static_cast<std::size_t>(w) * grid.height, 0);
     double worst = 0.0;
     for (std::size_t t = 0; t < mesh.triangle_count(); ++t) {
         const Index ia = mesh.triangles[3 * t], ib = mesh.triangles[3 * t + 1],

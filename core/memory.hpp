@@ -46,12 +46,4 @@ template <typename T> struct LargeAllocator {
 
 template <typename T> using LargeVector = std::vector<T, LargeAllocator<T>>;
 
-// A vector of n copies of value.
-template <typename T> LargeVector<T> large_vector(std::size_t n, const T& value = T{}) {
-    LargeVector<T> v;
-    v.reserve(n);
-    v.assign(n, value);
-    return v;
-}
-
 } // namespace tb::core

@@ -307,7 +307,7 @@ std::size_t Refiner::merge_pass() {
     // The error points around each vertex, when there are any.
     LargeVector<std::int64_t> error_points;
     if (error_points_ != 0) {
-        error_points = large_vector<std::int64_t>(nv, 0);
+        error_points.assign(nv, 0);
         for (Index t = 0; t < tin_.triangle_slots(); ++t) {
             if (tin_.alive(t)) {
                 for (Index e = 3 * t; e < 3 * t + 3; ++e) {

@@ -235,7 +235,7 @@ void Tin::compact(const std::function<void(Index, Index)>& swap_also) {
     }
     std::sort(keys.begin(), keys.end());
     // New vertex numbers: the live ones in that order, then the removed ones (dropped below).
-    LargeVector<Index> vmap = large_vector(points.size(), kNone);
+    LargeVector<Index> vmap(points.size(), kNone);
     for (Index i = 0; i < keys.size(); ++i) {
         vmap[keys[i].second] = i;
     }
@@ -250,7 +250,7 @@ void Tin::compact(const std::function<void(Index, Index)>& swap_also) {
         return std::min(
             {vmap[triangles[3 * t]], vmap[triangles[3 * t + 1]], vmap[triangles[3 * t + 2]]});
     };
-    LargeVector<Index> first = large_vector<Index>(points.size() + 1, 0);
+    LargeVector<Index> first(points.size() + 1, 0);
     for (Index t = 0; t < triangle_slots(); ++t) {
         if (alive(t)) {
             ++first[lowest(t) + 1];
@@ -260,7 +260,7 @@ void Tin::compact(const std::function<void(Index, Index)>& swap_also) {
         first[v] += first[v - 1];
     }
     const Index live_triangles = first.back();
-    LargeVector<Index> tmap = large_vector(triangle_slots(), kNone);
+    LargeVector<Index> tmap(triangle_slots(), kNone);
     next = live_triangles;
     for (Index t = 0; t < triangle_slots(); ++t) {
         tmap[t] = alive(t) ? first[lowest(t)]++ : next++;
@@ -302,8 +302,8 @@ void Tin::compact(const std::function<void(Index, Index)>& swap_also) {
 
 Mesh Tin::to_mesh(const std::vector<float>& heights, int width) const {
     Mesh mesh;
-    LargeVector<Index> vmap = large_vector(points.size(), kNone);
-    LargeVector<Index> tmap = large_vector(triangle_slots(), kNone);
+    LargeVector<Index> vmap(points.size(), kNone);
+    LargeVector<Index> tmap(triangle_slots(), kNone);
     Index nt = 0;
     for (Index t = 0; t < triangle_slots(); ++t) {
         if (alive(t)) {

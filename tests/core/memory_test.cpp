@@ -19,11 +19,11 @@ bool aligned(const void* p) {
 TEST_CASE("within a HugePages scope, arrays of 2 MiB and more start on a 2 MiB boundary") {
     // glibc puts a large block 16 bytes past a page boundary, so without the scope an array is
     // never 2 MiB aligned: the test tells the two apart.
-    const auto outside = tb::core::large_vector<std::uint64_t>(kHuge / 4, 1u); // 4 MiB
+    const tb::core::LargeVector<std::uint64_t> outside(kHuge / 4, 1u); // 4 MiB
     CHECK(!aligned(outside.data()));
     {
         const tb::core::HugePages on(true);
-        auto bigger = tb::core::large_vector<std::uint64_t>(kHuge / 4, 1u);
+        tb::core::LargeVector<std::uint64_t> bigger(kHuge / 4, 1u);
         CHECK(aligned(bigger.data()));
         // The contents are those of any vector, growth included.
         bigger.resize(bigger.size() * 3, 2u);
@@ -32,15 +32,15 @@ TEST_CASE("within a HugePages scope, arrays of 2 MiB and more start on a 2 MiB b
         CHECK(bigger.back() == 2u);
         {
             const tb::core::HugePages off(false);
-            const auto plain = tb::core::large_vector<char>(kHuge, 'x');
+            const tb::core::LargeVector<char> plain(kHuge, 'x');
             CHECK(!aligned(plain.data()));
             CHECK(plain.back() == 'x');
         }
         // The inner scope ended: the outer one holds again.
-        const auto again = tb::core::large_vector<char>(kHuge, 'x');
+        const tb::core::LargeVector<char> again(kHuge, 'x');
         CHECK(aligned(again.data()));
     }
-    const auto after = tb::core::large_vector<char>(kHuge, 'y');
+    const tb::core::LargeVector<char> after(kHuge, 'y');
     CHECK(!aligned(after.data()));
 }
 #else
