@@ -81,11 +81,55 @@ void check_mesh(const Mesh& mesh, int width, int height) {
     }
 }
 
+namespace {
+
+// One bit per sample, set when some triangle covers it.
+class Coverage {
+public:
+    explicit Coverage(std::size_t samples) : bits_((samples + 63) / 64, 0), samples_(samples) {}
+    // Marks samples [first, last] (last >= first).
+    void mark(std::size_t first, std::size_t last) {
+        const std::size_t w0 = first / 64, w1 = last / 64;
+        const std::uint64_t head = ~std::uint64_t{0} << (first % 64);
+        const std::uint64_t tail = ~std::uint64_t{0} >> (63 - last % 64);
+        if (w0 == w1) {
+            bits_[w0] |= head & tail;
+            return;
+        }
+        bits_[w0] |= head;
+        for (std::size_t k = w0 + 1; k < w1; ++k) {
+            bits_[k] = ~std::uint64_t{0};
+        }
+        bits_[w1] |= tail;
+    }
+    // True when every sample with valid[i] != 0 (every sample when valid is empty) is marked.
+    bool covers(const std::vector<std::uint8_t>& valid) const {
+        for (std::size_t k = 0; k < bits_.size(); ++k) {
+            if (bits_[k] == ~std::uint64_t{0}) {
+                continue;
+            }
+            const std::size_t end = std::min(samples_, 64 * k + 64);
+            for (std::size_t i = 64 * k; i < end; ++i) {
+                if ((bits_[k] >> (i % 64) & 1) == 0 && (valid.empty() || valid[i] != 0)) {
+                    return false;
+                }
+            }
+        }
+        return true;
+    }
+
+private:
+    LargeVector<std::uint64_t> bits_;
+    std::size_t samples_;
+};
+
+} // namespace
+
 double max_error(const Mesh& mesh, const HeightGrid& grid) {
     // Every triangle is scanned over its closed area, so a sample on an edge is judged by every
     // triangle that touches it; a valid sample covered by none makes the error infinite.
     const int w = grid.width;
-    LargeVector<std::uint8_t> covered(static_cast<std::size_t>(w) * grid.height, 0);
+    Coverage covered(static_cast<std::size_t>(w) * grid.height);
     double worst = 0.0;
     for (std::size_t t = 0; t < mesh.triangle_count(); ++t) {
         const Index ia = mesh.triangles[3 * t], ib = mesh.triangles[3 * t + 1],
@@ -122,9 +166,7 @@ double max_error(const Mesh& mesh, const HeightGrid& grid) {
             const std::int64_t sa = -(std::int64_t{c.y} - b.y), sb = -(std::int64_t{a.y} - c.y),
                                sc = -(std::int64_t{b.y} - a.y);
             const std::size_t row = static_cast<std::size_t>(y) * static_cast<std::size_t>(w);
-            std::fill(covered.begin() + static_cast<std::ptrdiff_t>(row + lo),
-                      covered.begin() + static_cast<std::ptrdiff_t>(row + hi + 1),
-                      std::uint8_t{1});
+            covered.mark(row + static_cast<std::size_t>(lo), row + static_cast<std::size_t>(hi));
             // Sample xx at weights (wa, wb, wc), anywhere in the closed triangle.
             const auto judge = [&](std::int64_t xx) {
                 const GridPoint p{static_cast<std::int32_t>(xx), y};
@@ -148,26 +190,30 @@ double max_error(const Mesh& mesh, const HeightGrid& grid) {
                 continue;
             }
             judge(lo);
-            wa += sa, wb += sb, wc += sc;
             const float* heights = grid.heights.data() + row;
             const std::uint8_t* valid = grid.valid.empty() ? nullptr : grid.valid.data() + row;
-            for (std::int64_t xx = lo + 1; xx < hi; ++xx, wa += sa, wb += sb, wc += sc) {
-                TB_ASSERT(wa > 0 && wb > 0 && wc > 0);
+            // The weights are integers below 2^53: doubles step them exactly, so each sample
+            // gets the same inside formula, on the same values, as interpolate() would.
+            const double fa = static_cast<double>(sa), fb = static_cast<double>(sb),
+                         fc = static_cast<double>(sc);
+            double da = static_cast<double>(wa + sa), db = static_cast<double>(wb + sb),
+                   dc = static_cast<double>(wc + sc);
+            double row_worst = 0.0;
+            for (std::int64_t xx = lo + 1; xx < hi; ++xx, da += fa, db += fb, dc += fc) {
+                TB_ASSERT(da > 0 && db > 0 && dc > 0);
                 if (valid != nullptr && valid[xx] == 0) {
                     continue;
                 }
-                const double z = interpolate_inside(wa, wb, wc, za, zb, zc, inv_area);
-                worst = std::max(worst, std::abs(z - static_cast<double>(heights[xx])));
+                const double z = interpolate_inside(da, db, dc, za, zb, zc, inv_area);
+                row_worst = std::max(row_worst, std::abs(z - static_cast<double>(heights[xx])));
             }
+            worst = std::max(worst, row_worst);
+            const std::int64_t steps = hi - lo;
+            wa += steps * sa, wb += steps * sb, wc += steps * sc;
             judge(hi);
         }
     }
-    for (std::size_t i = 0; i < covered.size(); ++i) {
-        if (covered[i] == 0 && (grid.valid.empty() || grid.valid[i] != 0)) {
-            return std::numeric_limits<double>::infinity();
-        }
-    }
-    return worst;
+    return covered.covers(grid.valid) ? worst : std::numeric_limits<double>::infinity();
 }
 
 double longest_edge(const Mesh& mesh) {

@@ -2,11 +2,13 @@
 // independent exact oracle (linf_oracle.hpp) and by check_mesh.
 #include <doctest/doctest.h>
 
+#include <limits>
 #include <string>
 #include <tuple>
 #include <vector>
 
 #include "core/error.hpp"
+#include "core/predicates.hpp"
 #include "core/triangulate.hpp"
 #include "tests/core/linf_oracle.hpp"
 #include "tests/core/terrains.hpp"
@@ -187,4 +189,45 @@ TEST_CASE("without its own error pass the mesh is the same and still within eps 
             }
         }
     }
+}
+
+TEST_CASE("max_error is infinite exactly when a valid sample lies in no triangle (150x9)") {
+    // Rows of 150 samples span several words of the check's coverage map. One of the two
+    // triangles of a flat grid is dropped; each sample it alone covered is made valid in turn.
+    const HeightGrid g = terrain::make(150, 9, [](int, int) { return 7.0; });
+    const Mesh full = tb::core::triangulate(g, TriangulateOptions{.eps = 1.0});
+    REQUIRE(full.triangle_count() == 2);
+    CHECK(tb::core::max_error(full, g) == 0.0);
+    Mesh half = full;
+    half.triangles.resize(3);
+    half.halfedges.resize(3);
+    const tb::core::GridPoint a = half.points[half.triangles[0]];
+    const tb::core::GridPoint b = half.points[half.triangles[1]];
+    const tb::core::GridPoint c = half.points[half.triangles[2]];
+    HeightGrid masked = g;
+    masked.valid.assign(g.heights.size(), 0);
+    std::vector<std::size_t> uncovered;
+    for (int y = 0; y < g.height; ++y) {
+        for (int x = 0; x < g.width; ++x) {
+            const tb::core::GridPoint p{x, y};
+            const bool in = tb::core::orient2d(b, c, p) >= 0 && tb::core::orient2d(c, a, p) >= 0 &&
+                            tb::core::orient2d(a, b, p) >= 0;
+            const std::size_t i = static_cast<std::size_t>(y) * g.width + x;
+            masked.valid[i] = in ? 1 : 0;
+            if (!in) {
+                uncovered.push_back(i);
+            }
+        }
+    }
+    REQUIRE(uncovered.size() > 500);
+    CHECK(tb::core::max_error(half, g) == std::numeric_limits<double>::infinity());
+    CHECK(tb::core::max_error(half, masked) == 0.0);
+    int missed = 0;
+    for (std::size_t i : uncovered) {
+        masked.valid[i] = 1;
+        missed +=
+            tb::core::max_error(half, masked) == std::numeric_limits<double>::infinity() ? 0 : 1;
+        masked.valid[i] = 0;
+    }
+    CHECK(missed == 0);
 }
