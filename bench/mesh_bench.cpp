@@ -3,10 +3,13 @@
 // (the peer columns are "-" here; bench/mesh_bench.sh fills them from delatin's run).
 // Exits 1 if any achieved_max_err > eps: the bound is the product, speed is secondary.
 //
-// usage: mesh_bench [--reps N] [--json DIR] INPUT EPS[,EPS...] [INPUT EPS... ...]
+// usage: mesh_bench [--reps N] [--json DIR] [--phases] INPUT EPS[,EPS...] [INPUT EPS... ...]
 //   INPUT = NAME=FILE.f32:W:H  raw little-endian float32, row-major (shared/bench format)
 //         | synth:SEED:W:H     seeded synthetic terrain (ridges + noise, 0.1 height steps)
 // --json DIR writes every mesh as DIR/NAME-epsE.json for shared/bench's linf_check.
+// --phases prints instead, per case, where the fastest run's time went (core's
+// TriangulatePhases):  input size eps ms triangles anchors_ms start_ms first_scan_ms split_ms
+// renumber_ms merge_ms finish_ms anchors split_triangles merge_passes removed
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -118,6 +121,7 @@ void write_json(const std::string& path, const tb::core::Mesh& m) {
 
 int main(int argc, char** argv) {
     int reps = 3;
+    bool phases = false;
     std::string json_dir;
     std::vector<std::string> args(argv + 1, argv + argc);
     for (std::size_t i = 0; i < args.size();) {
@@ -125,6 +129,9 @@ int main(int argc, char** argv) {
             reps = std::max(1, std::stoi(args[i + 1]));
             args.erase(args.begin() + static_cast<std::ptrdiff_t>(i),
                        args.begin() + static_cast<std::ptrdiff_t>(i) + 2);
+        } else if (args[i] == "--phases") {
+            phases = true;
+            args.erase(args.begin() + static_cast<std::ptrdiff_t>(i));
         } else if (args[i] == "--json" && i + 1 < args.size()) {
             json_dir = args[i + 1];
             args.erase(args.begin() + static_cast<std::ptrdiff_t>(i),
@@ -134,12 +141,18 @@ int main(int argc, char** argv) {
         }
     }
     if (args.empty() || args.size() % 2 != 0) {
-        std::cerr << "usage: mesh_bench [--reps N] [--json DIR] INPUT EPS[,EPS...] ...\n"
+        std::cerr << "usage: mesh_bench [--reps N] [--json DIR] [--phases] INPUT EPS[,EPS...] ...\n"
                      "  INPUT = NAME=FILE.f32:W:H | synth:SEED:W:H\n";
         return 2;
     }
     bool ok = true;
-    std::cout << "input\tsize\teps\tms\ttriangles\tachieved_max_err\tpeer_triangles\tratio\n";
+    if (phases) {
+        std::cout << "input\tsize\teps\tms\ttriangles\tanchors_ms\tstart_ms\tfirst_scan_ms"
+                     "\tsplit_ms\trenumber_ms\tmerge_ms\tfinish_ms\tanchors\tsplit_triangles"
+                     "\tmerge_passes\tremoved\n";
+    } else {
+        std::cout << "input\tsize\teps\tms\ttriangles\tachieved_max_err\tpeer_triangles\tratio\n";
+    }
     for (std::size_t i = 0; i < args.size(); i += 2) {
         std::string name;
         HeightGrid g;
@@ -152,11 +165,40 @@ int main(int argc, char** argv) {
             const double eps = std::stod(e);
             std::vector<double> times;
             tb::core::Mesh mesh;
+            tb::core::TriangulatePhases fastest;
             for (int r = 0; r < reps; ++r) {
+                tb::core::TriangulatePhases run;
                 const auto t0 = std::chrono::steady_clock::now();
-                mesh = tb::core::triangulate(g, {.eps = eps, .lock_border = true});
+                mesh = tb::core::triangulate(
+                    g, {.eps = eps, .lock_border = true}, phases ? &run : nullptr);
                 const auto t1 = std::chrono::steady_clock::now();
                 times.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
+                if (r == 0 || run.total_ms() < fastest.total_ms()) {
+                    fastest = run;
+                }
+            }
+            if (phases) {
+                std::printf("%s\t%dx%d\t%s\t%.1f\t%zu\t%.1f\t%.1f\t%.1f\t%.1f\t%.1f\t%.1f\t%.1f"
+                            "\t%zu\t%zu\t%zu\t%zu\n",
+                            name.c_str(),
+                            g.width,
+                            g.height,
+                            e.c_str(),
+                            fastest.total_ms(),
+                            mesh.triangle_count(),
+                            fastest.anchors_ms,
+                            fastest.start_ms,
+                            fastest.first_scan_ms,
+                            fastest.split_ms,
+                            fastest.renumber_ms,
+                            fastest.merge_ms,
+                            fastest.finish_ms,
+                            fastest.anchors,
+                            fastest.split_triangles,
+                            fastest.merge_passes,
+                            fastest.removed);
+                std::fflush(stdout);
+                continue;
             }
             // Best of the runs: the statistic ../shared/bench/run_js_peer.mjs reports for the
             // peer, so the two are compared like for like.

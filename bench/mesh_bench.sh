@@ -3,7 +3,7 @@
 # on the same heightmaps: delatin (npm) always, and hmm (fogleman/hmm, C++) when HMM names its
 # binary. Not a test.
 #
-#   [HMM=/path/to/hmm] bench/mesh_bench.sh [--reps N] [--quick] [--instructions]
+#   [HMM=/path/to/hmm] bench/mesh_bench.sh [--reps N] [--quick] [--instructions] [--phases]
 #
 # Builds bench/mesh_bench in Release into build-bench (-DTB_BUILD_BENCH=ON), copies
 # ../shared/bench (read-only) to bench/runs/peer (git-ignored), installs delatin there with
@@ -26,6 +26,13 @@
 # misses or stalls, so the times stay the target. About 50x slower than a timing round.
 # HMM_IR names another hmm binary for the count (default HMM): valgrind cannot run a
 # -march=native build that uses AVX-512, so count a copy built without -march=native.
+# --phases then runs ours N more times per case and prints where the fastest run's time went
+# (mesh_bench --phases: core's TriangulatePhases), against hmm's time from the rounds above:
+#   input size eps ms anchors_ms start_ms first_scan_ms split_ms renumber_ms merge_ms finish_ms
+#   split_triangles split_ratio to_split_speed merge_of_hmm
+# split_ratio = our triangles when the split agent first ends (before any merge) / hmm's;
+# to_split_speed = hmm's ms / ours up to then (anchors + start + first scan + split);
+# merge_of_hmm = the merge agent's ms / hmm's whole ms.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 shared=${TB_SHARED_BENCH:-$root/../shared/bench}
@@ -34,12 +41,15 @@ peer=$runs/peer
 reps=3
 quick=0
 instructions=0
+phases=0
 while [ $# -gt 0 ]; do
     case $1 in
         --reps) reps=$2; shift 2 ;;
         --quick) quick=1; shift ;;
         --instructions) instructions=1; shift ;;
-        *) echo "usage: [HMM=/path/to/hmm] $0 [--reps N] [--quick] [--instructions]" >&2; exit 2 ;;
+        --phases) phases=1; shift ;;
+        *) echo "usage: [HMM=/path/to/hmm] $0 [--reps N] [--quick] [--instructions] [--phases]" >&2
+           exit 2 ;;
     esac
 done
 if [ "$instructions" = 1 ] && ! command -v valgrind > /dev/null; then
@@ -103,6 +113,7 @@ minimum() { awk -v a="$1" -v b="$2" 'BEGIN { print (a == "" || b + 0 < a + 0) ? 
 
 status=0
 declare -A hmm_unit=() hmm_lossy=() # per input, for --instructions
+declare -A hmm_ms=() hmm_tris=()    # per "input eps", for --phases
 printf 'input\tsize\teps\tms\ttriangles\tachieved_max_err\tdelatin_triangles\tdelatin_ratio'
 printf '\tdelatin_ms\tdelatin_speed\thmm_triangles\thmm_ratio\thmm_ms\thmm_speed\tlinf_check\n'
 for c in "${cases[@]}"; do
@@ -158,6 +169,8 @@ for c in "${cases[@]}"; do
         if [ -n "$hmm" ]; then
             hcols=$(awk -v a="$tris" -v b="${htris[$eps]}" -v t="$t" -v h="${hms[$eps]}" \
                 'BEGIN { printf "%d\t%.3f\t%s\t%.2f", b, a / b, h, h / t }')
+            hmm_ms["$name $eps"]=${hms[$eps]}
+            hmm_tris["$name $eps"]=${htris[$eps]}
         fi
         printf '%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%b\t%s\n' "$input" "$sz" "$eps" "$t" \
             "$tris" "$err" "$ptris" "$ratio" "$pms" "$speed" "$hcols" "$verdict"
@@ -200,6 +213,28 @@ if [ "$instructions" = 1 ]; then
             fi
             printf '%s\t%s\t%s\t%s\t%b\n' "$name" "$size" "$eps" "$ir" "$hcols"
         done
+    done
+fi
+
+# ---- phases (--phases): where our time goes, against hmm's whole run ----
+if [ "$phases" = 1 ]; then
+    printf 'input\tsize\teps\tms\tanchors_ms\tstart_ms\tfirst_scan_ms\tsplit_ms\trenumber_ms'
+    printf '\tmerge_ms\tfinish_ms\tsplit_triangles\tsplit_ratio\tto_split_speed\tmerge_of_hmm\n'
+    for c in "${cases[@]}"; do
+        read -r name size epss <<< "$c"
+        "$bench" --phases --reps "$reps" "$name=data/$name.f32:$size:$size" "$epss" | tail -n +2 |
+            while IFS=$'\t' read -r _ sz eps ms _ an st fs sp rn mg fin _ stris _ _; do
+                h=${hmm_ms["$name $eps"]:-}
+                ht=${hmm_tris["$name $eps"]:-}
+                hcols="-\t-\t-"
+                if [ -n "$h" ]; then
+                    hcols=$(awk -v tris="$stris" -v ht="$ht" -v h="$h" -v up="$an $st $fs $sp" \
+                        -v mg="$mg" 'BEGIN { split(up, p, " "); u = p[1] + p[2] + p[3] + p[4]
+                        printf "%.3f\t%.2f\t%.2f", tris / ht, h / u, mg / h }')
+                fi
+                printf '%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%b\n' "$name" "$sz" \
+                    "$eps" "$ms" "$an" "$st" "$fs" "$sp" "$rn" "$mg" "$fin" "$stris" "$hcols"
+            done
     done
 fi
 exit $status

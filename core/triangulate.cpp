@@ -4,6 +4,7 @@
 // valid sample is over eps and no vertex can be removed. Ends with the exact guarantee check.
 #include "core/triangulate.hpp"
 
+#include <chrono>
 #include <cmath>
 #include <sstream>
 #include <string>
@@ -20,6 +21,8 @@ namespace {
 
 // Merge passes after the first clean split; each later pass finds fewer removable vertices.
 constexpr int kMaxRounds = 4;
+
+using Clock = std::chrono::steady_clock;
 
 std::string number(double v) {
     std::ostringstream s;
@@ -72,24 +75,56 @@ void check_input(const HeightGrid& grid, const TriangulateOptions& options) {
     }
 }
 
-Mesh triangulate(const HeightGrid& grid, const TriangulateOptions& options) {
+Mesh triangulate(const HeightGrid& grid,
+                 const TriangulateOptions& options,
+                 TriangulatePhases* phases) {
     check_input(grid, options);
+    // With phases (reset here): the time since the last mark goes to *into.
+    if (phases != nullptr) {
+        *phases = TriangulatePhases{};
+    }
+    auto last = phases != nullptr ? Clock::now() : Clock::time_point{};
+    const auto mark = [&](double TriangulatePhases::*into) {
+        if (phases != nullptr) {
+            const auto now = Clock::now();
+            phases->*into += std::chrono::duration<double, std::milli>(now - last).count();
+            last = now;
+        }
+    };
     const HugePages huge_pages(options.huge_pages);
     const double eps = options.eps;
     const int max_step = max_step_for(options.max_edge);
     const std::vector<GridPoint> anchors = anchor_points(grid, eps, max_step);
+    mark(&TriangulatePhases::anchors_ms);
     // With room for the split agent's vertices (Refiner::kGrowth), which compact() keeps.
     Tin start = delaunay_rectangle(
         grid.width, grid.height, anchors, Refiner::kGrowth * (anchors.size() + 4));
     start.compact(); // triangles in Z-order, so the split agent's rescans stay local
+    mark(&TriangulatePhases::start_ms);
     Refiner refiner(grid, eps, options.lock_border, options.max_edge, std::move(start));
+    mark(&TriangulatePhases::first_scan_ms);
     refiner.split_until_clean();
+    mark(&TriangulatePhases::split_ms);
+    if (phases != nullptr) {
+        phases->anchors = anchors.size();
+        const Tin& tin = refiner.tin();
+        phases->split_triangles = tin.triangle_slots() - tin.free_triangles.size();
+        last = Clock::now();
+    }
     refiner.compact(); // the merge agent walks the whole mesh: give it locality first
+    mark(&TriangulatePhases::renumber_ms);
     for (int round = 0; round < kMaxRounds; ++round) {
-        if (refiner.merge_pass() == 0) {
+        const std::size_t removed = refiner.merge_pass();
+        mark(&TriangulatePhases::merge_ms);
+        if (phases != nullptr) {
+            ++phases->merge_passes;
+            phases->removed += removed;
+        }
+        if (removed == 0) {
             break;
         }
         refiner.split_until_clean();
+        mark(&TriangulatePhases::split_ms);
     }
     Mesh mesh = refiner.tin().to_mesh(grid.heights, grid.width);
     // The guarantee, checked in every build: O(triangles + samples), a few percent of the run.
@@ -108,6 +143,7 @@ Mesh triangulate(const HeightGrid& grid, const TriangulateOptions& options) {
                         " samples long > max_edge " + number(options.max_edge));
         }
     }
+    mark(&TriangulatePhases::finish_ms);
     return mesh;
 }
 

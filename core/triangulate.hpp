@@ -32,6 +32,26 @@ struct TriangulateOptions {
 
 inline constexpr double kMinMaxEdge = 1.5;
 
+// Where one triangulate() call spent its time, phase by phase (wall milliseconds, steady
+// clock), and what each phase left: for benchmarks (bench/mesh_bench --phases).
+struct TriangulatePhases {
+    double anchors_ms = 0.0;    // §3.1: the 1-D fits of the borders and scan lines
+    double start_ms = 0.0;      // the anchors' Delaunay triangulation and its renumbering
+    double first_scan_ms = 0.0; // the error scan of every start triangle
+    double split_ms = 0.0;      // the split agent, every round
+    double renumber_ms = 0.0;   // the renumbering before the merge agent
+    double merge_ms = 0.0;      // the merge agent, every pass
+    double finish_ms = 0.0;     // the mesh out, its tiling and error checks
+    std::size_t anchors = 0;
+    std::size_t split_triangles = 0; // when the split agent first ends, before any merge
+    std::size_t merge_passes = 0;
+    std::size_t removed = 0; // vertices the merge agent removed
+    double total_ms() const {
+        return anchors_ms + start_ms + first_scan_ms + split_ms + renumber_ms + merge_ms +
+               finish_ms;
+    }
+};
+
 // Contract: grid is at least 2x2, heights finite wherever valid (and finite everywhere: callers
 // fill nodata before meshing), eps > 0 and finite; otherwise throws tb::InputError naming the
 // problem. On return every valid sample lies within eps of the mesh (checked exactly unless
@@ -39,7 +59,10 @@ inline constexpr double kMinMaxEdge = 1.5;
 // exactly once, counter-clockwise, with no T-junction, every edge is at most options.max_edge
 // long (when > 0; max_edge finite and 0 or >= kMinMaxEdge, else InputError), and the result is
 // deterministic bit for bit.
-Mesh triangulate(const HeightGrid& grid, const TriangulateOptions& options);
+// When phases is given it is filled; the mesh is the same either way.
+Mesh triangulate(const HeightGrid& grid,
+                 const TriangulateOptions& options,
+                 TriangulatePhases* phases = nullptr);
 
 // Throws tb::InputError naming the problem when triangulate() would refuse grid or options.
 void check_input(const HeightGrid& grid, const TriangulateOptions& options);

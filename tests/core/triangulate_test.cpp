@@ -7,6 +7,7 @@
 #include <tuple>
 #include <vector>
 
+#include "core/breakpoints.hpp"
 #include "core/error.hpp"
 #include "core/predicates.hpp"
 #include "core/triangulate.hpp"
@@ -230,4 +231,38 @@ TEST_CASE("max_error is infinite exactly when a valid sample lies in no triangle
         masked.valid[i] = 0;
     }
     CHECK(missed == 0);
+}
+
+TEST_CASE("the phase record changes no mesh and counts what each phase left (seeds 21-24)") {
+    std::size_t removed = 0;
+    for (std::uint64_t seed = 21; seed <= 24; ++seed) {
+        const HeightGrid g = terrain::named(kKinds[seed % kKinds.size()], 90, 70, seed);
+        for (double eps : {0.5, 4.0}) {
+            INFO("seed ", seed, " eps ", eps);
+            const TriangulateOptions opt{.eps = eps, .max_edge = 20.0};
+            const Mesh plain = tb::core::triangulate(g, opt);
+            tb::core::TriangulatePhases phases;
+            const Mesh recorded = tb::core::triangulate(g, opt, &phases);
+            CHECK(recorded.points == plain.points);
+            CHECK(recorded.triangles == plain.triangles);
+            CHECK(recorded.halfedges == plain.halfedges);
+            CHECK(phases.anchors == tb::core::anchor_points(g, eps, 20).size());
+            // The merge agent only removes: after the split the mesh had at least as many.
+            CHECK(phases.split_triangles >= recorded.triangle_count());
+            CHECK(phases.merge_passes >= 1);
+            CHECK(phases.merge_passes <= 4);
+            removed += phases.removed;
+            for (double ms : {phases.anchors_ms,
+                              phases.start_ms,
+                              phases.first_scan_ms,
+                              phases.split_ms,
+                              phases.renumber_ms,
+                              phases.merge_ms,
+                              phases.finish_ms}) {
+                CHECK(ms >= 0.0);
+            }
+            CHECK(phases.total_ms() > 0.0);
+        }
+    }
+    CHECK(removed > 0); // the merge agent ran on some of them
 }
