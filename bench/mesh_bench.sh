@@ -28,10 +28,12 @@
 # -march=native build that uses AVX-512, so count a copy built without -march=native.
 # --phases then runs ours N more times per case and prints where the fastest run's time went
 # (mesh_bench --phases: core's TriangulatePhases), against hmm's time from the rounds above:
-#   input size eps ms anchors_ms start_ms first_scan_ms split_ms renumber_ms merge_ms finish_ms
-#   split_triangles split_ratio to_split_speed merge_of_hmm
-# split_ratio = our triangles when the split agent first ends (before any merge) / hmm's;
-# to_split_speed = hmm's ms / ours up to then (anchors + start + first scan + split);
+#   input size eps phases_ms anchors_ms start_ms first_scan_ms split_ms resplit_ms renumber_ms
+#   merge_ms finish_ms split_triangles split_ratio to_split_speed merge_of_hmm
+# phases_ms is the sum of the phases; split_ms the split agent's first round, resplit_ms its
+# rounds after the merge passes. split_ratio = our triangles when the first round ends (before
+# any merge) / hmm's; to_split_speed = hmm's ms / ours up to then (anchors + start + first
+# scan + split);
 # merge_of_hmm = the merge agent's ms / hmm's whole ms.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
@@ -218,12 +220,13 @@ fi
 
 # ---- phases (--phases): where our time goes, against hmm's whole run ----
 if [ "$phases" = 1 ]; then
-    printf 'input\tsize\teps\tms\tanchors_ms\tstart_ms\tfirst_scan_ms\tsplit_ms\trenumber_ms'
-    printf '\tmerge_ms\tfinish_ms\tsplit_triangles\tsplit_ratio\tto_split_speed\tmerge_of_hmm\n'
+    printf 'input\tsize\teps\tphases_ms\tanchors_ms\tstart_ms\tfirst_scan_ms\tsplit_ms\tresplit_ms'
+    printf '\trenumber_ms\tmerge_ms\tfinish_ms\tsplit_triangles\tsplit_ratio\tto_split_speed'
+    printf '\tmerge_of_hmm\n'
     for c in "${cases[@]}"; do
         read -r name size epss <<< "$c"
         "$bench" --phases --reps "$reps" "$name=data/$name.f32:$size:$size" "$epss" | tail -n +2 |
-            while IFS=$'\t' read -r _ sz eps ms _ an st fs sp rn mg fin _ stris _ _; do
+            while IFS=$'\t' read -r _ sz eps ms _ an st fs sp rs rn mg fin _ stris _ _; do
                 h=${hmm_ms["$name $eps"]:-}
                 ht=${hmm_tris["$name $eps"]:-}
                 hcols="-\t-\t-"
@@ -232,8 +235,9 @@ if [ "$phases" = 1 ]; then
                         -v mg="$mg" 'BEGIN { split(up, p, " "); u = p[1] + p[2] + p[3] + p[4]
                         printf "%.3f\t%.2f\t%.2f", tris / ht, h / u, mg / h }')
                 fi
-                printf '%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%b\n' "$name" "$sz" \
-                    "$eps" "$ms" "$an" "$st" "$fs" "$sp" "$rn" "$mg" "$fin" "$stris" "$hcols"
+                printf '%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%b\n' "$name" \
+                    "$sz" "$eps" "$ms" "$an" "$st" "$fs" "$sp" "$rs" "$rn" "$mg" "$fin" "$stris" \
+                    "$hcols"
             done
     done
 fi

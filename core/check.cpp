@@ -1,8 +1,10 @@
 // The guarantee checks: check_mesh (exact tiling) and max_error (exact L-infinity error).
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <string>
+#include <vector>
 
 #include "core/error.hpp"
 #include "core/memory.hpp"
@@ -89,6 +91,7 @@ public:
     explicit Coverage(std::size_t samples) : bits_((samples + 63) / 64, 0), samples_(samples) {}
     // Marks samples [first, last] (last >= first).
     void mark(std::size_t first, std::size_t last) {
+        TB_ASSERT(first <= last && last < samples_);
         const std::size_t w0 = first / 64, w1 = last / 64;
         const std::uint64_t head = ~std::uint64_t{0} << (first % 64);
         const std::uint64_t tail = ~std::uint64_t{0} >> (63 - last % 64);

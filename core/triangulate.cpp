@@ -124,7 +124,7 @@ Mesh triangulate(const HeightGrid& grid,
             break;
         }
         refiner.split_until_clean();
-        mark(&TriangulatePhases::split_ms);
+        mark(&TriangulatePhases::resplit_ms);
     }
     Mesh mesh = refiner.tin().to_mesh(grid.heights, grid.width);
     // The guarantee, checked in every build: O(triangles + samples), a few percent of the run.

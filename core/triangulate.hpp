@@ -38,7 +38,8 @@ struct TriangulatePhases {
     double anchors_ms = 0.0;    // §3.1: the 1-D fits of the borders and scan lines
     double start_ms = 0.0;      // the anchors' Delaunay triangulation and its renumbering
     double first_scan_ms = 0.0; // the error scan of every start triangle
-    double split_ms = 0.0;      // the split agent, every round
+    double split_ms = 0.0;      // the split agent's first round, from the start mesh
+    double resplit_ms = 0.0;    // its rounds after each merge pass
     double renumber_ms = 0.0;   // the renumbering before the merge agent
     double merge_ms = 0.0;      // the merge agent, every pass
     double finish_ms = 0.0;     // the mesh out, its tiling and error checks
@@ -47,8 +48,8 @@ struct TriangulatePhases {
     std::size_t merge_passes = 0;
     std::size_t removed = 0; // vertices the merge agent removed
     double total_ms() const {
-        return anchors_ms + start_ms + first_scan_ms + split_ms + renumber_ms + merge_ms +
-               finish_ms;
+        return anchors_ms + start_ms + first_scan_ms + split_ms + resplit_ms + renumber_ms +
+               merge_ms + finish_ms;
     }
 };
 

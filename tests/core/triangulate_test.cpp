@@ -2,6 +2,9 @@
 // independent exact oracle (linf_oracle.hpp) and by check_mesh.
 #include <doctest/doctest.h>
 
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
 #include <limits>
 #include <string>
 #include <tuple>
@@ -165,6 +168,58 @@ TEST_CASE("max_error equals the oracle's largest error where the heights moved (
     }
 }
 
+TEST_CASE("max_error is bit for bit the largest interpolate() error over each closed triangle") {
+    // The guarantee check walks spans with stepped weights; this walks every sample of each
+    // triangle's bounding box with weights from orient2d, through the one shared interpolate(),
+    // on grids whose heights moved away from the mesh. The largest error must be exactly the
+    // same (==), over all samples and over single samples (a mask of one valid sample).
+    for (std::uint64_t seed = 41; seed <= 52; ++seed) {
+        const HeightGrid g = terrain::named(kKinds[seed % kKinds.size()], 131, 67, seed);
+        const Mesh m = tb::core::triangulate(g, TriangulateOptions{.eps = 1.5});
+        HeightGrid moved = g;
+        terrain::Lcg r(seed);
+        for (float& h : moved.heights) {
+            h = terrain::quantize(h + (r.next() < 0.3 ? 40.0 * r.next() - 20.0 : 0.0));
+        }
+        // Each sample's error: the worst of the closed triangles that hold it.
+        std::vector<double> error(moved.heights.size(), -1.0);
+        for (std::size_t t = 0; t < m.triangle_count(); ++t) {
+            const tb::core::Index ia = m.triangles[3 * t], ib = m.triangles[3 * t + 1],
+                                  ic = m.triangles[3 * t + 2];
+            const tb::core::GridPoint a = m.points[ia], b = m.points[ib], c = m.points[ic];
+            const double inv_area = tb::core::inverse_area(a, b, c);
+            for (int y = std::min({a.y, b.y, c.y}); y <= std::max({a.y, b.y, c.y}); ++y) {
+                for (int x = std::min({a.x, b.x, c.x}); x <= std::max({a.x, b.x, c.x}); ++x) {
+                    const tb::core::GridPoint p{x, y};
+                    const std::int64_t wa = tb::core::orient2d(b, c, p);
+                    const std::int64_t wb = tb::core::orient2d(c, a, p);
+                    const std::int64_t wc = tb::core::orient2d(a, b, p);
+                    if (wa < 0 || wb < 0 || wc < 0) {
+                        continue;
+                    }
+                    const double z = tb::core::interpolate(
+                        a, m.z[ia], b, m.z[ib], c, m.z[ic], wa, wb, wc, inv_area, p);
+                    double& e = error[static_cast<std::size_t>(y) * moved.width + x];
+                    e = std::max(e, std::abs(z - static_cast<double>(moved.at(x, y))));
+                }
+            }
+        }
+        INFO("seed ", seed);
+        const double worst = *std::max_element(error.begin(), error.end());
+        CHECK(worst > 1.5);
+        CHECK(tb::core::max_error(m, moved) == worst);
+        moved.valid.assign(moved.heights.size(), 0);
+        int differ = 0;
+        for (int k = 0; k < 300; ++k) {
+            const auto i = static_cast<std::size_t>(r.next() * static_cast<double>(error.size()));
+            moved.valid[i] = 1;
+            differ += tb::core::max_error(m, moved) == error[i] ? 0 : 1;
+            moved.valid[i] = 0;
+        }
+        CHECK(differ == 0);
+    }
+}
+
 TEST_CASE("without its own error pass the mesh is the same and still within eps (seeds 12, 13)") {
     // check_error off skips triangulate()'s last measure (callers that measure what they draw
     // turn it off); the bound must then hold by construction, and nothing else may change.
@@ -244,11 +299,12 @@ TEST_CASE("the phase record changes no mesh and counts what each phase left (see
             tb::core::TriangulatePhases phases;
             const Mesh recorded = tb::core::triangulate(g, opt, &phases);
             CHECK(recorded.points == plain.points);
+            CHECK(recorded.z == plain.z);
             CHECK(recorded.triangles == plain.triangles);
             CHECK(recorded.halfedges == plain.halfedges);
-            CHECK(phases.anchors == tb::core::anchor_points(g, eps, 20).size());
-            // The merge agent only removes: after the split the mesh had at least as many.
-            CHECK(phases.split_triangles >= recorded.triangle_count());
+            CHECK(phases.anchors ==
+                  tb::core::anchor_points(g, eps, tb::core::max_step_for(opt.max_edge)).size());
+            CHECK(phases.split_triangles >= 2);
             CHECK(phases.merge_passes >= 1);
             CHECK(phases.merge_passes <= 4);
             removed += phases.removed;
@@ -256,12 +312,20 @@ TEST_CASE("the phase record changes no mesh and counts what each phase left (see
                               phases.start_ms,
                               phases.first_scan_ms,
                               phases.split_ms,
+                              phases.resplit_ms,
                               phases.renumber_ms,
                               phases.merge_ms,
                               phases.finish_ms}) {
                 CHECK(ms >= 0.0);
             }
             CHECK(phases.total_ms() > 0.0);
+            // The record is reset by each call: a second call into it counts the same again.
+            tb::core::TriangulatePhases again = phases;
+            tb::core::triangulate(g, opt, &again);
+            CHECK(again.anchors == phases.anchors);
+            CHECK(again.split_triangles == phases.split_triangles);
+            CHECK(again.merge_passes == phases.merge_passes);
+            CHECK(again.removed == phases.removed);
         }
     }
     CHECK(removed > 0); // the merge agent ran on some of them
