@@ -33,8 +33,7 @@
 # phases_ms is the sum of the phases; split_ms the split agent's first round, resplit_ms its
 # rounds after the merge passes. split_ratio = our triangles when the first round ends (before
 # any merge) / hmm's; to_split_speed = hmm's ms / ours up to then (anchors + start + first
-# scan + split);
-# merge_of_hmm = the merge agent's ms / hmm's whole ms.
+# scan + split); merge_of_hmm = the merge agent's ms / hmm's whole ms.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 shared=${TB_SHARED_BENCH:-$root/../shared/bench}
@@ -231,8 +230,8 @@ if [ "$phases" = 1 ]; then
                 ht=${hmm_tris["$name $eps"]:-}
                 hcols="-\t-\t-"
                 if [ -n "$h" ]; then
-                    hcols=$(awk -v tris="$stris" -v ht="$ht" -v h="$h" -v up="$an $st $fs $sp" \
-                        -v mg="$mg" 'BEGIN { split(up, p, " "); u = p[1] + p[2] + p[3] + p[4]
+                    hcols=$(awk -v tris="$stris" -v ht="$ht" -v h="$h" -v mg="$mg" -v an="$an" \
+                        -v st="$st" -v fs="$fs" -v sp="$sp" 'BEGIN { u = an + st + fs + sp
                         printf "%.3f\t%.2f\t%.2f", tris / ht, h / u, mg / h }')
                 fi
                 printf '%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%b\n' "$name" \

@@ -109,7 +109,6 @@ Mesh triangulate(const HeightGrid& grid,
         phases->anchors = anchors.size();
         const Tin& tin = refiner.tin();
         phases->split_triangles = tin.triangle_slots() - tin.free_triangles.size();
-        last = Clock::now();
     }
     refiner.compact(); // the merge agent walks the whole mesh: give it locality first
     mark(&TriangulatePhases::renumber_ms);
