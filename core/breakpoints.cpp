@@ -215,7 +215,9 @@ std::vector<int> row_breakpoints(const HeightGrid& grid, double eps, int y, int 
 
 } // namespace
 
-std::vector<GridPoint> anchor_points(const HeightGrid& grid, double eps, int max_step) {
+std::vector<GridPoint>
+anchor_points(const HeightGrid& grid, double eps, int max_step, int line_step) {
+    TB_ASSERT(max_step >= 0 && line_step >= 0);
     const int w = grid.width;
     const int h = grid.height;
     std::vector<GridPoint> pts;
@@ -235,16 +237,19 @@ std::vector<GridPoint> anchor_points(const HeightGrid& grid, double eps, int max
     for (int y : right) {
         pts.push_back({w - 1, y});
     }
+    // The interior lines' cap: the tighter of max_step and line_step (0 = none).
+    const int line_cap =
+        line_step == 0 ? max_step : (max_step == 0 ? line_step : std::min(max_step, line_step));
     // Only a scan line's interior breakpoints are anchors: its ends lie on the other two
     // borders, whose vertices are exactly their own fits.
     const auto add_column = [&](int x) {
-        const auto ys = column_breakpoints(grid, eps, x, max_step);
+        const auto ys = column_breakpoints(grid, eps, x, line_cap);
         for (std::size_t k = 1; k + 1 < ys.size(); ++k) {
             pts.push_back({x, ys[k]});
         }
     };
     const auto add_row = [&](int y) {
-        const auto xs = row_breakpoints(grid, eps, y, max_step);
+        const auto xs = row_breakpoints(grid, eps, y, line_cap);
         for (std::size_t k = 1; k + 1 < xs.size(); ++k) {
             pts.push_back({xs[k], y});
         }
@@ -274,10 +279,9 @@ std::vector<GridPoint> anchor_points(const HeightGrid& grid, double eps, int max
         std::max(0.0, static_cast<double>(left.size() + right.size()) / 2.0 - 2.0);
     const double per_row =
         std::max(0.0, static_cast<double>(top.size() + bottom.size()) / 2.0 - 2.0);
-    const double forecast =
-        static_cast<double>(pts.size()) +
-        static_cast<double>(all_cols.size() - cols.size()) * per_column +
-        static_cast<double>(all_rows.size() - rows.size()) * per_row;
+    const double forecast = static_cast<double>(pts.size()) +
+                            static_cast<double>(all_cols.size() - cols.size()) * per_column +
+                            static_cast<double>(all_rows.size() - rows.size()) * per_row;
     if (forecast <= kAnchorBudget * static_cast<double>(w) * static_cast<double>(h)) {
         for (std::size_t i = 1; i + 1 < all_cols.size(); ++i) {
             if (!std::binary_search(cols.begin(), cols.end(), all_cols[i])) {

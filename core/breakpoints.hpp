@@ -38,10 +38,13 @@ struct HeightGrid;
 // breakpoints of the horizontal border with fewer breakpoints, and of the horizontal scan lines
 // through those of the vertical border with fewer breakpoints. Beyond the paper, when a
 // forecast from the borders puts the anchors within 1% of the samples (coarse eps), the scan
-// lines through the other two borders' breakpoints as well. Sorted in raster order, unique, always containing the four
-// corners; a pure function of (grid, eps, max_step). max_step as in fit_breakpoints, for every
-// fit.
-std::vector<GridPoint> anchor_points(const HeightGrid& grid, double eps, int max_step = 0);
+// lines through the other two borders' breakpoints as well. Sorted in raster order, unique, always
+// containing the four corners; a pure function of (grid, eps, max_step, line_step). max_step as in
+// fit_breakpoints, for every fit. line_step >= 1 caps the interior scan lines' segments further
+// (the borders' fits never see it): each such fit then costs O(samples * line_step) instead of
+// O(samples * reach), where a coarse eps lets a segment reach far; 0 = no further cap.
+std::vector<GridPoint>
+anchor_points(const HeightGrid& grid, double eps, int max_step = 0, int line_step = 0);
 
 // The breakpoints of one border: side 0 = top row (y = 0), 1 = bottom row, 2 = left column
 // (x = 0), 3 = right column; positions along the border.

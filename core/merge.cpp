@@ -24,14 +24,10 @@
 namespace tb::core {
 namespace {
 
-// Larger holes are left alone: the dynamic program is cubic in the hole's size.
-constexpr std::size_t kMaxHole = 24;
 // Candidate triangles are estimated on every kStride-th row and column, except those smaller
 // than kSmallTriangle (doubled area), which are scanned in full at once.
 constexpr int kStride = 2;
 constexpr std::int64_t kSmallTriangle = 64;
-// Re-runs of the dynamic program after a chosen triangle fails its full scan.
-constexpr int kMaxAttempts = 6;
 
 // Visit order: fewer error points in the neighbourhood (41 bits; only a merge before the split
 // is clean has any), then position along the Z-order curve, unique per vertex.
@@ -47,7 +43,7 @@ struct Candidate {
 
 } // namespace
 
-bool Refiner::try_remove(Index v, std::vector<Index>& ring) {
+bool Refiner::try_remove(Index v, std::vector<Index>& ring, const MergeLimits& limits) {
     tin_.ring(v, ring);
     const bool border = tin_.halfedges[ring.front()] == kNone;
     auto& poly = scratch_.poly;
@@ -65,7 +61,7 @@ bool Refiner::try_remove(Index v, std::vector<Index>& ring) {
         // The last neighbour, reached over the last triangle's far edge.
         poly.push_back(tin_.triangles[prev_edge(ring.back())]);
     }
-    if (poly.size() > kMaxHole || poly.size() < 3) {
+    if (poly.size() > limits.max_hole || poly.size() < 3) {
         return false;
     }
     for (Index w : poly) {
@@ -224,7 +220,7 @@ bool Refiner::try_remove(Index v, std::vector<Index>& ring) {
     }
     std::optional<std::vector<std::array<int, 3>>> tris;
     for (int attempt = 0;; ++attempt) {
-        if (attempt == kMaxAttempts) {
+        if (attempt == limits.max_attempts) {
             return false;
         }
         dp.side_ready = true; // this polygon's sides, as far as known
@@ -301,7 +297,7 @@ bool Refiner::try_remove(Index v, std::vector<Index>& ring) {
     return true;
 }
 
-std::size_t Refiner::merge_pass() {
+std::size_t Refiner::merge_pass(const MergeLimits& limits) {
     const std::size_t nv = tin_.points.size();
     dirty_.resize(nv, 1);
     // The error points around each vertex, when there are any.
@@ -357,7 +353,7 @@ std::size_t Refiner::merge_pass() {
             continue;
         }
         dirty_[v] = 0;
-        if (try_remove(v, ring)) {
+        if (try_remove(v, ring, limits)) {
             ++removed;
         }
     }

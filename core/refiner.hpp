@@ -15,6 +15,16 @@
 
 namespace tb::core {
 
+// How much the merge agent tries per vertex (triangulate() picks it by TriangulateOptions::effort).
+struct MergeLimits {
+    // Holes with more vertices are left alone: the dynamic program is cubic in the hole's size.
+    // A hole around an interior vertex has as many vertices as the vertex has neighbours.
+    std::size_t max_hole = 24;
+    // Runs of the dynamic program per vertex: each re-run follows a chosen triangle that failed
+    // its full scan (the program works on estimates, see merge.cpp).
+    int max_attempts = 6;
+};
+
 class Refiner {
 public:
     // Room reserved for the split agent's vertices, as a multiple of the start's. The split
@@ -37,9 +47,9 @@ public:
     // One pass of the merge agent (merge.cpp) over the vertices, along the Z-order curve (fewer
     // error points around first, when there are any): a vertex is removed when the optimal
     // re-triangulation of its hole has no more error points than its neighbourhood had.
-    // Vertices already tried whose neighbourhood has not changed since are skipped. Returns the
-    // number of vertices removed.
-    std::size_t merge_pass();
+    // Vertices already tried whose neighbourhood has not changed since are skipped, and so are
+    // those whose hole is over limits.max_hole. Returns the number of vertices removed.
+    std::size_t merge_pass(const MergeLimits& limits = {});
 
     // Renumbers vertices and triangles along a Z-order curve (Tin::compact) so that the merge
     // agent's walks stay in cache; caches and queue follow. Vertex indices change.
@@ -54,7 +64,7 @@ private:
     void set_stats(Index t, const TriangleStats& st); // also (re)queues t
     void release(Index t);                            // forgets t's stats, frees it
     void swap_around(Index p, std::vector<Index>& stack);
-    bool try_remove(Index v, std::vector<Index>& ring);
+    bool try_remove(Index v, std::vector<Index>& ring, const MergeLimits& limits);
     // Squared length of t's longest edge and that edge (first of equals).
     std::int64_t longest_edge2(Index t, Index& edge) const;
     bool too_long(GridPoint a, GridPoint b) const { // inline: the merge agent asks per triangle

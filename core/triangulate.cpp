@@ -1,7 +1,8 @@
 // Lu & Yun, "Optimizing Triangular Mesh Generation from Range Images": the split-merge
 // algorithm end to end (§3): anchor points by 1-D optimal fits (§3.1), their Delaunay
 // triangulation, then the split agent (§3.3) and the merge agent (§3.4) alternate until no
-// valid sample is over eps and no vertex can be removed. Ends with the exact guarantee check.
+// valid sample is over eps and no vertex can be removed (Effort::Best; the other levels bound
+// the merge agent's work). Ends with the exact guarantee check.
 #include "core/triangulate.hpp"
 
 #include <chrono>
@@ -19,8 +20,38 @@
 namespace tb::core {
 namespace {
 
-// Merge passes after the first clean split; each later pass finds fewer removable vertices.
-constexpr int kMaxRounds = 4;
+// What each effort level runs after the anchors' triangulation (see Effort; the figures are
+// from bench/mesh_bench.sh and valgrind instruction counts of triangulate(), 2026-12-04).
+struct Plan {
+    // Merge passes after the first clean split (at least 1: the split agent's mesh alone is
+    // over hmm's triangles at coarse eps); each later pass finds fewer removable vertices.
+    int merge_rounds;
+    MergeLimits merge;
+    // anchor_points' line_step: the interior scan lines' longest segment (0 = no cap).
+    int line_step;
+};
+
+Plan plan_for(Effort effort) {
+    switch (effort) {
+    case Effort::Fast:
+        // Interior scan lines of segments of at most 32 samples: at coarse eps their fits cost
+        // O(samples * 32) instead of O(samples * reach) (reach 64 on fuji-513 eps 50), and the
+        // few extra anchors they leave are what the merge pass removes first. Then one pass over
+        // the vertices of degree <= 5 with one dynamic program each: it removes most of what a
+        // full pass removes at a fraction of its cost, and takes every bench case under hmm's
+        // triangles.
+        return {1, MergeLimits{.max_hole = 5, .max_attempts = 1}, 32};
+    case Effort::Balanced:
+        // One merge pass over the vertices of degree <= 8. The knee of the curve: in
+        // instructions per triangle removed (fuji-513 eps 6), degree 6 after Fast's pass costs
+        // 15 k, degrees 7-8 41 k, the larger holes of the same pass 137 k and Best's later passes
+        // 107 k. Within 2-5 % of Best's triangles for about 20 % less work.
+        return {1, MergeLimits{.max_hole = 8, .max_attempts = 6}, 0};
+    case Effort::Best:
+        break;
+    }
+    return {4, MergeLimits{}, 0};
+}
 
 using Clock = std::chrono::steady_clock;
 
@@ -32,6 +63,29 @@ std::string number(double v) {
 }
 
 } // namespace
+
+Effort parse_effort(std::string_view name) {
+    for (const Effort effort : {Effort::Fast, Effort::Balanced, Effort::Best}) {
+        if (name == to_string(effort)) {
+            return effort;
+        }
+    }
+    throw InputError("effort \"" + std::string(name) +
+                     "\" is not a level: expected fast, balanced or best");
+}
+
+const char* to_string(Effort effort) {
+    switch (effort) {
+    case Effort::Fast:
+        return "fast";
+    case Effort::Balanced:
+        return "balanced";
+    case Effort::Best:
+        return "best";
+    }
+    TB_ASSERT(false);
+    return "best";
+}
 
 void check_input(const HeightGrid& grid, const TriangulateOptions& options) {
     if (grid.width < 2 || grid.height < 2) {
@@ -67,6 +121,11 @@ void check_input(const HeightGrid& grid, const TriangulateOptions& options) {
     if (!std::isfinite(options.eps) || options.eps <= 0.0) {
         throw InputError("eps must be finite and > 0, got " + number(options.eps));
     }
+    if (options.effort != Effort::Fast && options.effort != Effort::Balanced &&
+        options.effort != Effort::Best) {
+        throw InputError("effort " + std::to_string(static_cast<int>(options.effort)) +
+                         " is not a level: expected fast, balanced or best");
+    }
     if (!std::isfinite(options.max_edge) || options.max_edge < 0.0 ||
         (options.max_edge > 0.0 && options.max_edge < kMinMaxEdge)) {
         throw InputError("max_edge must be 0 (no limit) or a finite length of at least " +
@@ -94,7 +153,8 @@ Mesh triangulate(const HeightGrid& grid,
     const HugePages huge_pages(options.huge_pages);
     const double eps = options.eps;
     const int max_step = max_step_for(options.max_edge);
-    const std::vector<GridPoint> anchors = anchor_points(grid, eps, max_step);
+    const Plan plan = plan_for(options.effort);
+    const std::vector<GridPoint> anchors = anchor_points(grid, eps, max_step, plan.line_step);
     mark(&TriangulatePhases::anchors_ms);
     // With room for the split agent's vertices (Refiner::kGrowth), which compact() keeps.
     Tin start = delaunay_rectangle(
@@ -112,8 +172,8 @@ Mesh triangulate(const HeightGrid& grid,
     }
     refiner.compact(); // the merge agent walks the whole mesh: give it locality first
     mark(&TriangulatePhases::renumber_ms);
-    for (int round = 0; round < kMaxRounds; ++round) {
-        const std::size_t removed = refiner.merge_pass();
+    for (int round = 0; round < plan.merge_rounds; ++round) {
+        const std::size_t removed = refiner.merge_pass(plan.merge);
         mark(&TriangulatePhases::merge_ms);
         if (phases != nullptr) {
             ++phases->merge_passes;

@@ -1,10 +1,30 @@
 #pragma once
 // The single entry point of the mesher: Lu & Yun's L-infinity split-merge triangulation.
 #include <functional>
+#include <string_view>
 
 #include "core/mesh.hpp"
 
 namespace tb::core {
+
+// How hard the mesher works for fewer triangles. Every level keeps every valid sample within
+// eps, gives the same locked border vertices (the border fits do not depend on it) and is
+// deterministic; the levels differ in the merge agent's work and the interior scan lines.
+//   Best:     the paper's split-merge in full (merge passes until none removes a vertex, at
+//             most 4; holes of up to 24 vertices).
+//   Balanced: one merge pass over the vertices of degree <= 8: within a few percent of Best's
+//             triangles for about a fifth less work.
+//   Fast:     the split agent from cheaper anchors, then one merge pass over the vertices of
+//             degree <= 5 only, one dynamic program each.
+// The measured curve (triangles against time, against hmm and delatin) is in bench/README.md,
+// "Effort levels".
+enum class Effort { Fast, Balanced, Best };
+
+// "fast", "balanced" or "best" (exactly, lower case); anything else throws tb::InputError
+// naming the value and the three choices.
+Effort parse_effort(std::string_view name);
+// The name parse_effort reads: "fast", "balanced" or "best".
+const char* to_string(Effort effort);
 
 struct TriangulateOptions {
     double eps = 1.0;        // vertical bound, same unit as the heights; > 0 and finite
@@ -28,6 +48,10 @@ struct TriangulateOptions {
     // machine), but up to 2 MiB unused at the end of each array. Off for many small meshes at
     // once: the tiler's strips, where it raised the peak memory of `build` by a quarter.
     bool huge_pages = true;
+    // Best by default so that a caller that does not say (the tiler, for now) gets the meshes it
+    // always got, bit for bit; the tiler will choose the level (its config key `effort`, with
+    // Balanced as the product's default) and record it with the tiles it publishes.
+    Effort effort = Effort::Best;
 };
 
 inline constexpr double kMinMaxEdge = 1.5;
