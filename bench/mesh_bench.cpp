@@ -1,16 +1,21 @@
 // Mesher benchmark (not a test): meshes fixed heightmaps at a list of eps and prints one TSV
-// line per case:  input size eps ms triangles achieved_max_err peer_triangles ratio
+// line per case and effort level:
+//   input size eps ms triangles achieved_max_err peer_triangles ratio effort
 // (the peer columns are "-" here; bench/mesh_bench.sh fills them from delatin's run).
 // Exits 1 if any achieved_max_err > eps: the bound is the product, speed is secondary.
 //
-// usage: mesh_bench [--reps N] [--json DIR] [--phases] INPUT EPS[,EPS...] [INPUT EPS... ...]
+// usage: mesh_bench [--reps N] [--effort fast|balanced|best|all] [--json DIR] [--phases]
+//                   INPUT EPS[,EPS...] [INPUT EPS... ...]
 //   INPUT = NAME=FILE.f32:W:H  raw little-endian float32, row-major (shared/bench format)
 //         | synth:SEED:W:H     seeded synthetic terrain (ridges + noise, 0.1 height steps)
-// --json DIR writes every mesh as DIR/NAME-epsE.json for shared/bench's linf_check.
+// --effort picks core's TriangulateOptions::effort (default best, core's default); `all` runs
+// the three levels, alternated in every rep so that they see the same load, and prints a line
+// for each (fast, balanced, best).
+// --json DIR writes every mesh as DIR/NAME-epsE-LEVEL.json for shared/bench's linf_check.
 // --phases prints instead, per case, where the fastest run's time went (core's
 // TriangulatePhases; phases_ms is their sum):  input size eps phases_ms triangles anchors_ms
 // start_ms first_scan_ms split_ms resplit_ms renumber_ms merge_ms finish_ms anchors
-// split_triangles merge_passes removed   (not with --json)
+// split_triangles merge_passes removed effort   (not with --json)
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -123,11 +128,26 @@ void write_json(const std::string& path, const tb::core::Mesh& m) {
 int main(int argc, char** argv) {
     int reps = 3;
     bool phases = false;
+    std::vector<tb::core::Effort> levels{tb::core::Effort::Best};
     std::string json_dir;
     std::vector<std::string> args(argv + 1, argv + argc);
     for (std::size_t i = 0; i < args.size();) {
         if (args[i] == "--reps" && i + 1 < args.size()) {
             reps = std::max(1, std::stoi(args[i + 1]));
+            args.erase(args.begin() + static_cast<std::ptrdiff_t>(i),
+                       args.begin() + static_cast<std::ptrdiff_t>(i) + 2);
+        } else if (args[i] == "--effort" && i + 1 < args.size()) {
+            if (args[i + 1] == "all") {
+                levels = {
+                    tb::core::Effort::Fast, tb::core::Effort::Balanced, tb::core::Effort::Best};
+            } else {
+                try {
+                    levels = {tb::core::parse_effort(args[i + 1])};
+                } catch (const std::exception& e) {
+                    std::cerr << "mesh_bench: --effort: " << e.what() << " (or all)\n";
+                    return 2;
+                }
+            }
             args.erase(args.begin() + static_cast<std::ptrdiff_t>(i),
                        args.begin() + static_cast<std::ptrdiff_t>(i) + 2);
         } else if (args[i] == "--phases") {
@@ -146,7 +166,8 @@ int main(int argc, char** argv) {
         return 2;
     }
     if (args.empty() || args.size() % 2 != 0) {
-        std::cerr << "usage: mesh_bench [--reps N] [--json DIR] [--phases] INPUT EPS[,EPS...] ...\n"
+        std::cerr << "usage: mesh_bench [--reps N] [--effort fast|balanced|best|all] [--json DIR]"
+                     " [--phases] INPUT EPS[,EPS...] ...\n"
                      "  INPUT = NAME=FILE.f32:W:H | synth:SEED:W:H\n";
         return 2;
     }
@@ -154,9 +175,10 @@ int main(int argc, char** argv) {
     if (phases) {
         std::cout << "input\tsize\teps\tphases_ms\ttriangles\tanchors_ms\tstart_ms"
                      "\tfirst_scan_ms\tsplit_ms\tresplit_ms\trenumber_ms\tmerge_ms\tfinish_ms"
-                     "\tanchors\tsplit_triangles\tmerge_passes\tremoved\n";
+                     "\tanchors\tsplit_triangles\tmerge_passes\tremoved\teffort\n";
     } else {
-        std::cout << "input\tsize\teps\tms\ttriangles\tachieved_max_err\tpeer_triangles\tratio\n";
+        std::cout << "input\tsize\teps\tms\ttriangles\tachieved_max_err\tpeer_triangles\tratio"
+                     "\teffort\n";
     }
     for (std::size_t i = 0; i < args.size(); i += 2) {
         std::string name;
@@ -168,60 +190,73 @@ int main(int argc, char** argv) {
         std::stringstream ss(args[i + 1]);
         for (std::string e; std::getline(ss, e, ',');) {
             const double eps = std::stod(e);
-            std::vector<double> times;
-            tb::core::Mesh mesh;
-            tb::core::TriangulatePhases fastest;
+            const std::size_t nl = levels.size();
+            std::vector<std::vector<double>> times(nl);
+            std::vector<tb::core::Mesh> meshes(nl);
+            std::vector<tb::core::TriangulatePhases> fastest(nl);
+            // Level after level within each rep, so that all see the same load.
             for (int r = 0; r < reps; ++r) {
-                tb::core::TriangulatePhases run;
-                const auto t0 = std::chrono::steady_clock::now();
-                mesh = tb::core::triangulate(
-                    g, {.eps = eps, .lock_border = true}, phases ? &run : nullptr);
-                const auto t1 = std::chrono::steady_clock::now();
-                times.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
-                if (r == 0 || run.total_ms() < fastest.total_ms()) {
-                    fastest = run;
+                for (std::size_t l = 0; l < nl; ++l) {
+                    tb::core::TriangulatePhases run;
+                    const auto t0 = std::chrono::steady_clock::now();
+                    meshes[l] = tb::core::triangulate(
+                        g,
+                        {.eps = eps, .lock_border = true, .effort = levels[l]},
+                        phases ? &run : nullptr);
+                    const auto t1 = std::chrono::steady_clock::now();
+                    times[l].push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
+                    if (r == 0 || run.total_ms() < fastest[l].total_ms()) {
+                        fastest[l] = run;
+                    }
                 }
             }
-            // Best of the runs: the statistic ../shared/bench/run_js_peer.mjs reports for the
-            // peer, so the two are compared like for like.
-            std::sort(times.begin(), times.end());
-            const double err = tb::core::max_error(mesh, g);
-            ok = ok && err <= eps;
-            if (phases) {
-                std::printf("%s\t%dx%d\t%s\t%.1f\t%zu\t%.1f\t%.1f\t%.1f\t%.1f\t%.1f\t%.1f\t%.1f"
-                            "\t%.1f\t%zu\t%zu\t%zu\t%zu\n",
+            for (std::size_t l = 0; l < nl; ++l) {
+                const tb::core::Mesh& mesh = meshes[l];
+                const char* level = tb::core::to_string(levels[l]);
+                // Best of the runs: the statistic ../shared/bench/run_js_peer.mjs reports for the
+                // peer, so the two are compared like for like.
+                std::sort(times[l].begin(), times[l].end());
+                const double err = tb::core::max_error(mesh, g);
+                ok = ok && err <= eps;
+                if (phases) {
+                    const tb::core::TriangulatePhases& f = fastest[l];
+                    std::printf("%s\t%dx%d\t%s\t%.1f\t%zu\t%.1f\t%.1f\t%.1f\t%.1f\t%.1f\t%.1f"
+                                "\t%.1f\t%.1f\t%zu\t%zu\t%zu\t%zu\t%s\n",
+                                name.c_str(),
+                                g.width,
+                                g.height,
+                                e.c_str(),
+                                f.total_ms(),
+                                mesh.triangle_count(),
+                                f.anchors_ms,
+                                f.start_ms,
+                                f.first_scan_ms,
+                                f.split_ms,
+                                f.resplit_ms,
+                                f.renumber_ms,
+                                f.merge_ms,
+                                f.finish_ms,
+                                f.anchors,
+                                f.split_triangles,
+                                f.merge_passes,
+                                f.removed,
+                                level);
+                    std::fflush(stdout);
+                    continue;
+                }
+                std::printf("%s\t%dx%d\t%s\t%.1f\t%zu\t%.6g\t-\t-\t%s\n",
                             name.c_str(),
                             g.width,
                             g.height,
                             e.c_str(),
-                            fastest.total_ms(),
+                            times[l].front(),
                             mesh.triangle_count(),
-                            fastest.anchors_ms,
-                            fastest.start_ms,
-                            fastest.first_scan_ms,
-                            fastest.split_ms,
-                            fastest.resplit_ms,
-                            fastest.renumber_ms,
-                            fastest.merge_ms,
-                            fastest.finish_ms,
-                            fastest.anchors,
-                            fastest.split_triangles,
-                            fastest.merge_passes,
-                            fastest.removed);
+                            err,
+                            level);
                 std::fflush(stdout);
-                continue;
-            }
-            std::printf("%s\t%dx%d\t%s\t%.1f\t%zu\t%.6g\t-\t-\n",
-                        name.c_str(),
-                        g.width,
-                        g.height,
-                        e.c_str(),
-                        times.front(),
-                        mesh.triangle_count(),
-                        err);
-            std::fflush(stdout);
-            if (!json_dir.empty()) {
-                write_json(json_dir + "/" + name + "-eps" + e + ".json", mesh);
+                if (!json_dir.empty()) {
+                    write_json(json_dir + "/" + name + "-eps" + e + "-" + level + ".json", mesh);
+                }
             }
         }
     }
