@@ -12,8 +12,8 @@ namespace tb::core {
 // deterministic; the levels differ in the merge agent's work and the interior scan lines.
 //   Best:     the paper's split-merge in full (merge passes until none removes a vertex, at
 //             most 4; holes of up to 24 vertices).
-//   Balanced: one merge pass over the vertices of degree <= 8: within a few percent of Best's
-//             triangles for about a fifth less work.
+//   Balanced: one merge pass over the vertices of degree <= 8: 3-11 % more triangles than
+//             Best for 15-20 % less work on the bench cases.
 //   Fast:     the split agent from cheaper anchors, then one merge pass over the vertices of
 //             degree <= 5 only, one dynamic program each.
 // The measured curve (triangles against time, against hmm and delatin) is in bench/README.md,
