@@ -88,6 +88,21 @@ std::string describe_read(const tiler::ReadLevel& level) {
     return text;
 }
 
+// What zoom z's tiles read, for the plan's last column.
+std::string describe_zoom(const tiler::Layer& layer, int z) {
+    const auto& o = layer.options();
+    switch (layer.zoom_source(z)) {
+    case tiler::ZoomSource::Pixels:
+        return "full resolution (the DEM's pixels)";
+    case tiler::ZoomSource::Summary:
+        return "the summary's planes, judged by its blocks";
+    case tiler::ZoomSource::Lattice:
+        break;
+    }
+    return describe_read(layer.source().read_level(o.scheme, z, o.tile_size)) +
+           ", checked at full resolution";
+}
+
 // The pyramid a layer of this DEM would have: zooms, tiles per zoom, eps per zoom, and what
 // each zoom reads of the source.
 std::string
@@ -115,8 +130,10 @@ describe_pyramid(const std::string& path, tiler::Scheme scheme, std::optional<do
         << ", north " << b.north << " (pixel centres)\n";
     const bool pixels = layer->guarantee() == tiler::Guarantee::SourcePixels;
     out << "  guarantee:   "
-        << (pixels ? "by construction: tiles are meshed on the DEM's own pixel centres at full "
-                     "resolution at every zoom, so each tile's eps holds at every valid pixel"
+        << (pixels ? "tiles of the DEM's own zoom are meshed on its pixel centres, so their eps "
+                     "holds by construction; coarser tiles are meshed on the zoom's lattice and "
+                     "judged against every valid pixel under them, one by one or as blocks of "
+                     "the DEM's summary, and publish the larger of eps and what that measures"
                    : "measured: tiles are meshed on each zoom's lattice in the scheme's CRS and "
                      "checked at every valid source pixel centre (reprojected); a tile whose "
                      "measured error exceeds eps publishes the larger bound")
@@ -133,11 +150,7 @@ describe_pyramid(const std::string& path, tiler::Scheme scheme, std::optional<do
                       static_cast<long long>(r.x1 - r.x0 + 1),
                       static_cast<long long>(r.y1 - r.y0 + 1),
                       layer->eps_for_zoom(z),
-                      pixels
-                          ? "full resolution (the DEM's pixels)"
-                          : (describe_read(layer->source().read_level(o.scheme, z, o.tile_size)) +
-                             ", checked at full resolution")
-                                .c_str());
+                      describe_zoom(*layer, z).c_str());
         out << line;
     }
     return out.str();
@@ -172,8 +185,10 @@ const Command& info_command() {
          "The pyramid plan is what 'terrabound build' and 'serve' make of the DEM alone with\n"
          "default options: zoom range, tiles per zoom, each zoom's eps (metres), how that eps\n"
          "is made true at the DEM's own pixels (the guarantee), and what its tiles read: the\n"
-         "DEM's pixels at full resolution (lon/lat DEMs, and EPSG:3857 ones for mercator), or\n"
-         "for other CRSs every 2^k-th pixel or an overview, checked at full resolution."},
+         "DEM's pixels at full resolution (the finest zoom of lon/lat DEMs, and of EPSG:3857\n"
+         "ones for mercator), the DEM's multi-resolution summary (zooms whose lattice step\n"
+         "spans 8 pixels or more), or every 2^k-th pixel or an overview, checked at full\n"
+         "resolution (the zooms between, and every zoom of a DEM in another CRS)."},
         run};
     return command;
 }

@@ -45,11 +45,9 @@ DemTilePlan dem_tile_plan(const Layer& layer) {
             break;
         }
     }
-    for (int z = 0; z <= plan.max_zoom; ++z) {
-        if (tiles_covering(Scheme::Mercator, plan.bounds, z).count() <= 4) {
-            plan.min_zoom = z;
-        }
-    }
+    // From zoom 0: MapLibre and deck.gl draw no terrain below a raster-dem source's minzoom.
+    // Coarse zooms read the layer's summary where it has one (Layer::sample).
+    plan.min_zoom = 0;
     return plan;
 }
 
@@ -84,7 +82,7 @@ std::vector<double> dem_tile_heights(const Layer& layer, const TileId& id) {
     std::vector<std::uint8_t> valid(heights.size());
     for (int j = 0; j < w; ++j) {
         const LatticeBlock row =
-            layer.source().sample(Scheme::Mercator, id.z, lattice, c0, r0 + 2 * j, 2 * w - 1, 1);
+            layer.sample(Scheme::Mercator, id.z, lattice, c0, r0 + 2 * j, 2 * w - 1, 1);
         for (int i = 0; i < w; ++i) {
             heights[static_cast<std::size_t>(j) * w + i] =
                 row.heights[static_cast<std::size_t>(2 * i)];

@@ -12,8 +12,9 @@
 //   - heights are above sea level (DemHeights::SeaLevel) or the WGS84 ellipsoid;
 //   - the encoding's rounding is the only loss: at most half a step (1/512 m terrarium, 0.05 m
 //     mapbox).
-// Zooms: max = the first zoom whose pixel is as fine as the source's pixel; min = the deepest
-// zoom at which the data spans at most 2 x 2 tiles (the mesh pyramid's rule).
+// Zooms: max = the first zoom whose pixel is as fine as the source's pixel; min = 0 (clients
+// draw no terrain below a source's minzoom). A tile pixel spanning 8 source pixels or more
+// reads the layer's summary (Layer::sample) where the source has one.
 #include "tiler/formats/format.hpp"
 #include "tiler/layer.hpp"
 #include "tiler/tile_grid.hpp"

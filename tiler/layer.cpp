@@ -13,6 +13,8 @@
 #include "tiler/mesh/pixel_tile.hpp"
 #include "tiler/sources/gdal_source.hpp"
 #include "tiler/sources/geoid.hpp"
+#include "tiler/summary/dem_summary.hpp"
+#include "tiler/summary/summary_tile.hpp"
 
 #include <unistd.h>
 
@@ -44,6 +46,16 @@ constexpr int kFillMargin = 16;
 constexpr double kResolutionPerEps = 45.0;
 constexpr double kMinEps = 0.001;
 
+// CesiumJS's geometric error of a geodetic terrain level at zoom 0, metres: the equator's
+// length / 4 over a 65-sample tile, two tiles across (getLevelMaximumGeometricError).
+constexpr double kCesiumLevelError = 6378137.0 * 2 * 3.14159265358979323846 * 0.25 / (65 * 2);
+// The share of it globe terrain is meshed at, at least (see terrain_eps).
+constexpr double kTerrainLevelShare = 0.25;
+// 3D Tiles terrain tiles wider than this (zoom 6 and coarser) carry float32 positions: the
+// 16-bit box is level at the tile's centre, and far from it a step of the box moves a vertex's
+// height (4.7 m a step at zoom 6, hundreds of metres on a hemisphere at zoom 0).
+constexpr double kExactPositionsDegrees = 2.0;
+
 std::string tile_name(const TileId& id) {
     return std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
 }
@@ -64,6 +76,7 @@ public:
         }
         footprint_ = source_->footprint();
         pixels_ = source_->pixel_grid(options_.scheme);
+        summary_ok_ = pixels_ && summary_serves(*pixels_, options_.scheme);
         datum_ = options_.datum;
         if (datum_ == VerticalDatum::Auto) {
             datum_ =
@@ -187,10 +200,10 @@ public:
         spec.terrain = terrain_spec();
         spec.min_height = std::min(min_height_, kGeoidLowest);
         spec.max_height = std::max(max_height_, kGeoidHighest);
-        spec.root_error = relief() * std::exp2(std::max(min_zoom_ - 1, 0));
-        for (int z = min_zoom_; z <= max_zoom_; ++z) {
+        spec.root_error = relief() * std::exp2(std::max(terrain_min_zoom_ - 1, 0));
+        for (int z = terrain_min_zoom_; z <= max_zoom_; ++z) {
             spec.root_error = std::max(
-                spec.root_error, terrain_budget_at(z, eps_for_zoom(z)).drawn_bound * std::exp2(z));
+                spec.root_error, terrain_budget_at(z, terrain_eps(z)).drawn_bound * std::exp2(z));
         }
         const double lo = spec.min_height, hi = spec.max_height;
         spec.bounds = [lo, hi](const TileId& id) {
@@ -287,6 +300,18 @@ public:
     }
 
     TileRaster make_raster(const TileId& id) const override;
+    // The zoom's lattice sampled from the source (DemSource::sample), or read off the summary;
+    // either as a tile raster (raster_from: the datum applied, voids filled).
+    TileRaster lattice_raster(const TileId& id) const;
+    TileRaster summary_raster(const TileId& id) const;
+    TileRaster raster_from(const TileId& id, const LatticeBlock& block) const;
+
+    // The source's summary, made on first use (once, whichever thread asks first).
+    const DemSummary& summary() const {
+        std::call_once(summary_once_,
+                       [this] { summary_.emplace(DemSummary::build(*source_, *pixels_, datum_)); });
+        return *summary_;
+    }
 
     std::string make_tile_at(const TileId& id, Format format, double eps) const override {
         if (is_terrain_format(format)) {
@@ -328,8 +353,9 @@ public:
                                         &report,
                                         normals.empty() ? nullptr : &normals,
                                         options_.mesh_threads,
-                                        make_normals);
-        if (guarantee() == Guarantee::Measured) {
+                                        make_normals,
+                                        t.cells);
+        if (zoom_source(id.z) != ZoomSource::Pixels) {
             note_measured(id, eps, report);
         }
         return bytes;
@@ -352,32 +378,47 @@ public:
     // promise holds at the valid samples. `check_error`: see core::TriangulateOptions.
     MeshedTile mesh_at(const TileId& id, double eps, bool drop_voids, bool check_error) const {
         check_eps(eps, "eps");
-        check_id(id);
+        if (drop_voids) {
+            check_id(id);
+        } else {
+            check_terrain_id(id);
+        }
         MeshedTile t;
         t.budget = drop_voids ? budget_at(id.z, eps) : terrain_budget_at(id.z, eps);
-        if (pixels_) {
+        const ZoomSource from = zoom_source(id.z);
+        if (from == ZoomSource::Pixels) {
             PixelTile pixel = make_pixel_tile(*source_, *pixels_, options_.scheme, id, datum_);
             std::vector<std::uint8_t> valid;
             if (!drop_voids) {
                 valid = fill_for_terrain(pixel);
             }
-            t.mesh =
-                mesh_pixel_tile(pixel, t.budget, drop_voids, options_.mesh_threads, check_error);
+            t.mesh = mesh_pixel_tile(
+                pixel, t.budget, drop_voids, options_.mesh_threads, check_error, options_.effort);
             t.raster = std::move(pixel.raster);
             if (!drop_voids) {
                 t.raster.grid.valid.swap(valid);
             }
             return t;
         }
-        t.raster = make_raster(id);
+        t.raster = from == ZoomSource::Summary ? summary_raster(id) : lattice_raster(id);
         if (drop_voids) {
             t.mesh = to_tile_mesh(
-                t.raster, mesh_tile(t.raster, t.budget, options_.mesh_threads, check_error), true);
+                t.raster,
+                mesh_tile(t.raster, t.budget, options_.mesh_threads, check_error, options_.effort),
+                true);
         } else {
             TileRaster filled = t.raster;
             filled.grid.valid.clear();
             t.mesh = to_tile_mesh(
-                filled, mesh_tile(filled, t.budget, options_.mesh_threads, check_error), false);
+                filled,
+                mesh_tile(filled, t.budget, options_.mesh_threads, check_error, options_.effort),
+                false);
+        }
+        if (from == ZoomSource::Summary) {
+            // Every block of the summary under the tile, as the drawn tile must hold it.
+            const int level = summary_level(summary(), *pixels_, options_.scheme, id.z, options_.tile_size);
+            t.cells = summary_cells(summary(), *pixels_, t.raster, level);
+            return t;
         }
         // Every valid source pixel under the tile, as the drawn tile must hold it.
         for (const SourcePixel& p : source_->pixels_in(t.raster.bounds)) {
@@ -394,9 +435,24 @@ public:
         return pixels_ ? Guarantee::SourcePixels : Guarantee::Measured;
     }
 
+    ZoomSource zoom_source(int z) const override {
+        if (!pixels_) {
+            return ZoomSource::Lattice;
+        }
+        // As max_zoom is planned: the first zoom whose lattice is as fine as the pixels.
+        if (source_->pixels_per_sample(options_.scheme, z, options_.tile_size) <= 1 + 1e-9) {
+            return ZoomSource::Pixels;
+        }
+        if (summary_ok_ && pixels_per_step(*pixels_, options_.scheme, z, options_.tile_size) >=
+                               std::exp2(kFinestLevel)) {
+            return ZoomSource::Summary;
+        }
+        return ZoomSource::Lattice;
+    }
+
     double tile_error(const TileId& id) const override {
         const double eps = eps_for_zoom(id.z);
-        if (pixels_) {
+        if (zoom_source(id.z) == ZoomSource::Pixels) {
             return budget_at(id.z, eps).drawn_bound;
         }
         {
@@ -423,6 +479,26 @@ public:
     double max_height() const override { return max_height_; }
     VerticalDatum source_datum() const override { return datum_; }
     const DemSource& source() const override { return *source_; }
+
+    LatticeBlock sample(Scheme scheme,
+                        int z,
+                        int size,
+                        std::int64_t column0,
+                        std::int64_t row0,
+                        int width,
+                        int height) const override {
+        if (pixels_) {
+            const double pps = source_->pixels_per_sample(scheme, z, size);
+            if (pps >= std::exp2(kFinestLevel)) {
+                const DemSummary& sum = summary();
+                const int level = std::min(static_cast<int>(std::floor(std::log2(pps))),
+                                           sum.coarsest_level());
+                return summary_lattice(
+                    sum, *pixels_, datum_, scheme, z, size, level, column0, row0, width, height);
+            }
+        }
+        return source_->sample(scheme, z, size, column0, row0, width, height);
+    }
 
 private:
     // Fills the points of a line with no data (valid 0) linearly along the line between the
@@ -495,8 +571,8 @@ private:
     }
 
     TerrainSpec terrain_spec() const {
-        return TerrainSpec{options_.name, min_zoom_, max_zoom_, footprint_, [this](int z) {
-                               return eps_for_zoom(z);
+        return TerrainSpec{options_.name, terrain_min_zoom_, max_zoom_, footprint_, [this](int z) {
+                               return terrain_eps(z);
                            }};
     }
 
@@ -526,7 +602,7 @@ private:
                            " (clients upsample its parent)");
         }
         const LonLatBox bounds = tile_bounds(options_.scheme, id);
-        if (may_have_tile(id)) {
+        if (terrain_has_data(id)) {
             try {
                 return data_terrain(id, bounds);
             } catch (const NotFound&) {
@@ -555,7 +631,7 @@ private:
         // tile) across the slope: it is measured at every sample, and where it takes the tile
         // past its bound the worst samples become vertices (quantize_within). The border lines
         // keep the vertices the zoom's eps gave them, so neighbouring tiles still share them.
-        const double eps = eps_for_zoom(id.z);
+        const double eps = terrain_eps(id.z);
         const double target = terrain_budget_at(id.z, eps).drawn_bound;
         TerrainDraft draft;
         MeshedTile& t = draft.meshed;
@@ -568,7 +644,7 @@ private:
         std::size_t uncovered = 0;
         double error = 0;
         tile.mesh = quantize_within(
-            t.mesh, bounds, t.raster, t.source_pixels, target - t.budget.sag, error, &uncovered);
+            t.mesh, bounds, t.raster, t.source_pixels, target - t.budget.sag, error, &uncovered, t.cells);
         if (uncovered > 0) {
             log::debug("tile " + tile_name(id) + ": " + std::to_string(uncovered) +
                        " sample(s) lie in no quantized triangle");
@@ -591,15 +667,29 @@ private:
                        : encode_terrain_glb(draft.tile);
         }
         const MeshedTile& t = draft.meshed;
-        const double target = terrain_budget_at(id.z, eps_for_zoom(id.z)).drawn_bound;
+        const double target = terrain_budget_at(id.z, terrain_eps(id.z)).drawn_bound;
         TerrainTile& tile = draft.tile;
         double drawn = draft.quantized; // what the encoded format draws, at every sample
         if (format == Format::Terrain3d) {
-            drawn = surface_error(terrain_glb_surface(tile.mesh, false), t.raster, t.source_pixels);
-            if (drawn + t.budget.sag > target) {
+            // 16-bit positions, unless they draw the tile further from the DEM than its bound
+            // (or, on a coarser lattice than the pixels, 5 % further than the quantized mesh
+            // itself: the lattice's own error dominates there), or the tile is so wide that a
+            // 16-bit step of its box moves heights at its far side by metres (the box is level
+            // at the tile's centre).
+            const LonLatBox b = tile_bounds(options_.scheme, id);
+            tile.exact_positions = b.east - b.west > kExactPositionsDegrees;
+            const auto measure = [&] {
+                return surface_error(terrain_glb_surface(tile.mesh, tile.exact_positions),
+                                     t.raster,
+                                     t.source_pixels,
+                                     nullptr,
+                                     t.cells);
+            };
+            drawn = measure();
+            if (!tile.exact_positions &&
+                drawn > std::max(target - t.budget.sag, draft.quantized * 1.05) + 1e-9) {
                 tile.exact_positions = true;
-                drawn =
-                    surface_error(terrain_glb_surface(tile.mesh, true), t.raster, t.source_pixels);
+                drawn = measure();
             }
             tile.glb_error = std::max(drawn + t.budget.sag, target);
         } else {
@@ -607,10 +697,16 @@ private:
             tile.extras.metadata = terrain_metadata(terrain_spec(), id, tile.error, false);
         }
         if (drawn + t.budget.sag > target + 1e-9) {
-            log::warn(std::string("terrain tile ") + tile_name(id) + "." + extension(format) +
-                      ": quantization leaves it " + std::to_string(drawn + t.budget.sag) +
-                      " m from the DEM, above the zoom's bound " + std::to_string(target) +
-                      " m; the tile itself publishes the larger bound");
+            // A zoom meshed on a lattice coarser than the pixels is expected to miss them by
+            // more than eps (its bound is what it measures); at the pixels' own zoom only the
+            // quantization can.
+            const bool pixels = zoom_source(id.z) == ZoomSource::Pixels;
+            log::write(pixels ? log::Level::Warn : log::Level::Debug,
+                       std::string("terrain tile ") + tile_name(id) + "." + extension(format) +
+                           (pixels ? ": quantization leaves it " : ": it is ") +
+                           std::to_string(drawn + t.budget.sag) +
+                           " m from the DEM, above the zoom's eps " + std::to_string(target) +
+                           " m; the tile itself publishes the larger bound");
             std::lock_guard lock(measured_mutex_);
             ++over_eps_;
         }
@@ -648,7 +744,7 @@ private:
         std::vector<double> gx(m.vertex_count()), gy(m.vertex_count());
         double step_x = 0, step_y = 0;
         bool degrees = scheme == Scheme::Geodetic;
-        if (pixels_) {
+        if (zoom_source(id.z) == ZoomSource::Pixels) {
             const PixelGrid& g = *pixels_;
             degrees = g.lonlat;
             // A vertex in the pixel grid's units: lon/lat, or (mercator scheme) its native metres.
@@ -822,7 +918,9 @@ private:
         // against them), so a zoom whose tiles would hold more than kMaxPixelsPerTile is not
         // offered.
         int coarsest = 0;
-        while (coarsest <= max_z && tile_pixels(coarsest) > kMaxPixelsPerTile) {
+        // Zooms read from the summary read about their own number of samples, whatever the zoom.
+        while (coarsest <= max_z && zoom_source(coarsest) != ZoomSource::Summary &&
+               tile_pixels(coarsest) > kMaxPixelsPerTile) {
             ++coarsest;
         }
         if (coarsest > max_z) {
@@ -859,6 +957,9 @@ private:
                              to_string(options_.scheme) + " scheme's extent");
         }
         min_zoom_ = min_z;
+        // Globe terrain is meshed from the data from zoom 0 where the summary reaches that far
+        // (filler on the geoid below min_zoom otherwise, and where a tile holds no data).
+        terrain_min_zoom_ = summary_ok_ && !options_.min_zoom ? 0 : min_z;
         max_zoom_ = max_z;
     }
 
@@ -928,6 +1029,33 @@ private:
         max_height_ = hi + 1;
     }
 
+    // The eps globe terrain is meshed at: the ladder, or a share of CesiumJS's own level error
+    // where that is larger. CesiumJS picks quantized-mesh levels by its level error alone
+    // (kCesiumLevelError / 2^z), so a tile drawn closer than that costs bytes no view shows; and
+    // at coarse zooms straight triangles must follow the Earth's curve (the chord sag), which
+    // at the ladder's eps takes a full lattice of triangles (131,072 at zoom 0).
+    double terrain_eps_for_zoom(int z) const override { return terrain_eps(z); }
+    double terrain_eps(int z) const {
+        return std::max(eps_for_zoom(z), kCesiumLevelError / std::exp2(z) * kTerrainLevelShare);
+    }
+
+    // Whether a globe terrain tile is meshed from the data (else filler on the geoid).
+    bool terrain_has_data(const TileId& id) const {
+        if (!is_valid(options_.scheme, id) || id.z < terrain_min_zoom_ || id.z > max_zoom_) {
+            return false;
+        }
+        const TileRange r = tiles_covering(options_.scheme, footprint_, id.z);
+        return !r.empty() && id.x >= r.x0 && id.x <= r.x1 && id.y >= r.y0 && id.y <= r.y1;
+    }
+
+    // check_id for a globe terrain tile meshed from the data.
+    void check_terrain_id(const TileId& id) const {
+        if (!terrain_has_data(id)) {
+            check_id(id); // names the problem
+            throw NotFound("tile " + tile_name(id) + ": no globe terrain data there");
+        }
+    }
+
     void check_id(const TileId& id) const {
         if (!is_valid(options_.scheme, id)) {
             throw InputError("tile " + tile_name(id) + ": outside the " +
@@ -950,7 +1078,8 @@ private:
         return budget_with(z, eps, kTerrainSagShare);
     }
     ErrorBudget budget_with(int z, double eps, double sag_share) const {
-        return pixels_ ? pixel_error_budget(eps, options_.scheme, *pixels_, sag_share)
+        return zoom_source(z) == ZoomSource::Pixels
+                   ? pixel_error_budget(eps, options_.scheme, *pixels_, sag_share)
                        : tile_error_budget(eps, options_.scheme, z, options_.tile_size, sag_share);
     }
 
@@ -964,7 +1093,7 @@ private:
         const auto [it, fresh] = measured_.emplace(id, report.published);
         if (fresh && report.published > eps) {
             ++over_eps_;
-            log::info("tile " + tile_name(id) + ": measured against the source's pixels, its " +
+            log::debug("tile " + tile_name(id) + ": measured against the source's pixels, its " +
                       "error is " + std::to_string(report.published) + " m, above the zoom's eps " +
                       std::to_string(eps) + " m; the tileset publishes the measured bound");
         }
@@ -977,25 +1106,52 @@ private:
     LayerOptions options_;
     std::shared_ptr<const DemSource> source_;
     std::optional<PixelGrid> pixels_;
+    bool summary_ok_ = false; // the summary serves this scheme's coarse zooms (summary_serves)
+    mutable std::once_flag summary_once_;
+    mutable std::optional<DemSummary> summary_;
     mutable std::mutex measured_mutex_;
     mutable std::map<TileId, double> measured_;
     mutable std::size_t over_eps_ = 0;
     LonLatBox footprint_;
     VerticalDatum datum_ = VerticalDatum::Egm96;
     int min_zoom_ = 0, max_zoom_ = 0;
+    int terrain_min_zoom_ = 0;
     double finest_eps_ = 1;
     double min_height_ = 0, max_height_ = 0;
 };
 
 TileRaster DemLayer::make_raster(const TileId& id) const {
     check_id(id);
+    return zoom_source(id.z) == ZoomSource::Summary ? summary_raster(id) : lattice_raster(id);
+}
+
+TileRaster DemLayer::lattice_raster(const TileId& id) const {
+    const Scheme scheme = options_.scheme;
+    const int n = options_.tile_size;
+    const int w = n + 1 + 2 * kFillMargin;
+    const std::int64_t c0 = tile_first_column(scheme, id, n) - kFillMargin;
+    const std::int64_t r0 = tile_first_row(scheme, id, n) - kFillMargin;
+    return raster_from(id, source_->sample(scheme, id.z, n, c0, r0, w, w));
+}
+
+TileRaster DemLayer::summary_raster(const TileId& id) const {
+    const Scheme scheme = options_.scheme;
+    const int n = options_.tile_size;
+    const int w = n + 1 + 2 * kFillMargin;
+    const std::int64_t c0 = tile_first_column(scheme, id, n) - kFillMargin;
+    const std::int64_t r0 = tile_first_row(scheme, id, n) - kFillMargin;
+    const DemSummary& sum = summary();
+    const int level = summary_level(sum, *pixels_, scheme, id.z, n);
+    return raster_from(
+        id, summary_lattice(sum, *pixels_, datum_, scheme, id.z, n, level, c0, r0, w, w));
+}
+
+TileRaster DemLayer::raster_from(const TileId& id, const LatticeBlock& block) const {
     const Scheme scheme = options_.scheme;
     const int n = options_.tile_size;
     const int m = kFillMargin;
     const int w = n + 1 + 2 * m;
-    const std::int64_t c0 = tile_first_column(scheme, id, n) - m;
-    const std::int64_t r0 = tile_first_row(scheme, id, n) - m;
-    LatticeBlock block = source_->sample(scheme, id.z, n, c0, r0, w, w);
+    const std::int64_t c0 = block.column0, r0 = block.row0;
 
     // Undulation of every lattice point (the same for a point in every tile that holds it).
     std::vector<double> undulation(block.heights.size());
@@ -1061,7 +1217,11 @@ void check_eps(double eps, const std::string& what) {
 }
 
 core::Mesh
-mesh_tile(const TileRaster& raster, const ErrorBudget& budget, int threads, bool check_error) {
+mesh_tile(const TileRaster& raster,
+          const ErrorBudget& budget,
+          int threads,
+          bool check_error,
+          core::Effort effort) {
     // Two strips on two threads: a tile requested cold is ready in about 60 % of the time for
     // 0.1-0.7 % more triangles (the cut column is a locked border, as between two tiles).
     constexpr int kStrips = 2;
@@ -1072,7 +1232,8 @@ mesh_tile(const TileRaster& raster, const ErrorBudget& budget, int threads, bool
                                  .lock_border = true,
                                  .max_edge = budget.max_edge,
                                  .check_error = check_error,
-                                 .huge_pages = false},
+                                 .huge_pages = false,
+                                 .effort = effort},
         kStrips,
         threads,
         run_on_helper);
@@ -1151,6 +1312,18 @@ void move_into_place(const std::string& temp, const std::string& path) {
         throw IoError(path + ": cannot rename the temporary file into place (" + ec.message() +
                       ")");
     }
+}
+
+const char* to_string(ZoomSource source) {
+    switch (source) {
+    case ZoomSource::Pixels:
+        return "pixels";
+    case ZoomSource::Lattice:
+        return "lattice";
+    case ZoomSource::Summary:
+        return "summary";
+    }
+    return "?";
 }
 
 const char* to_string(Guarantee guarantee) {

@@ -2,9 +2,11 @@
 // A layer: one or more DEMs published as one tile pyramid. This is what the `tile`, `build`
 // and `serve` commands share: DEM -> tile raster -> mesh -> encoded bytes.
 #include "core/mesh.hpp"
+#include "core/triangulate.hpp"
 #include "tiler/formats/encode.hpp"
 #include "tiler/formats/format.hpp"
 #include "tiler/mesh/tile_mesh.hpp"
+#include "tiler/sources/gdal_source.hpp"
 #include "tiler/sources/tile_raster.hpp"
 #include "tiler/tile_grid.hpp"
 
@@ -50,6 +52,11 @@ struct LayerOptions {
     // Threads meshing one tile (its two strips): 2 for a server's cold tiles, 1 where tiles are
     // made side by side (build workers). The bytes are the same for any value.
     int mesh_threads = 2;
+    // How hard the mesher works for fewer triangles (core::Effort): fast, balanced or best.
+    // Every level keeps the same bound; a changed level is a new tile set (store manifests
+    // record it). Balanced: 3-11 % more triangles than best for 80-85 % of its work
+    // (bench/README.md, "Effort levels").
+    core::Effort effort = core::Effort::Balanced;
 };
 
 // How a layer makes its published error true at every valid pixel of the source.
@@ -72,7 +79,17 @@ struct MeshedTile {
     // Measured layers: every valid source pixel centre in the tile, in raster's grid
     // coordinates, ellipsoidal heights (encode_tile checks the drawn tile against them).
     std::vector<CheckPoint> source_pixels;
+    // Tiles read from the DEM's summary: its blocks under the tile, judged as wholes.
+    std::vector<CheckCell> cells;
 };
+
+// Where the tiles of one zoom read their heights (Layer::zoom_source).
+enum class ZoomSource {
+    Pixels,  // the source's own pixels, meshed at full resolution (tiler/mesh/pixel_tile.hpp)
+    Lattice, // the zoom's lattice sampled from the source, every pixel under the tile checked
+    Summary, // the zoom's lattice read off the summary, its blocks checked (tiler/summary/)
+};
+const char* to_string(ZoomSource source);
 
 // Where a tile request's eps comes from: the zoom's own ladder value, or one of the layer's
 // configured eps_levels (by index).
@@ -91,6 +108,9 @@ public:
     virtual int min_zoom() const = 0;
     virtual int max_zoom() const = 0;
     virtual double eps_for_zoom(int z) const = 0; // the ladder: finest * 2^(max_zoom - z)
+    // The eps globe terrain (quantized-mesh, 3D Tiles terrain) is meshed at: the ladder, or a
+    // share of CesiumJS's own level error where that is larger.
+    virtual double terrain_eps_for_zoom(int z) const = 0;
     virtual LonLatBox data_bounds() const = 0;    // the sources' extent in lon/lat
     virtual TileRange tiles_at(int z) const = 0;  // tiles of zoom z that may hold data
     virtual bool may_have_tile(const TileId& id) const = 0;
@@ -124,6 +144,10 @@ public:
     virtual MeshedTile mesh_tile_at(const TileId& id, double eps) const = 0;
 
     virtual Guarantee guarantee() const = 0;
+    // What zoom z's tiles read: Pixels at the zooms whose lattice is as fine as a pixel-grid
+    // source's pixels, Summary where a lattice step spans a summary block or more, Lattice in
+    // between and for every zoom of a source in another CRS.
+    virtual ZoomSource zoom_source(int z) const = 0;
     // The error a tile publishes at its zoom's eps (its tileset geometricError and .drc eps_m):
     // the budget's drawn bound, or for Measured layers the larger measured bound of that tile
     // (meshed here once if it was not made yet). Throws like make_tile.
@@ -140,6 +164,17 @@ public:
     virtual VerticalDatum source_datum() const = 0;
     // The DEM (or mosaic) the layer reads, e.g. for what each zoom reads (read_level).
     virtual const DemSource& source() const = 0;
+    // Samples of the DEM at the lattice points of (scheme, z, size), as DemSource::sample gives
+    // them; where a lattice step spans a block of the source's summary or more (a source on a
+    // pixel grid), the planes of the summary's blocks there instead, so a coarse zoom reads
+    // about its own number of samples (tiler/summary/summary_tile.hpp). Thread-safe.
+    virtual LatticeBlock sample(Scheme scheme,
+                                int z,
+                                int size,
+                                std::int64_t column0,
+                                std::int64_t row0,
+                                int width,
+                                int height) const = 0;
 };
 
 // Checks a published eps (metres) and throws InputError naming `what` unless it is finite and
@@ -154,7 +189,8 @@ void check_eps(double eps, const std::string& what);
 core::Mesh mesh_tile(const TileRaster& raster,
                      const ErrorBudget& budget,
                      int threads = 2,
-                     bool check_error = true);
+                     bool check_error = true,
+                     core::Effort effort = core::Effort::Balanced);
 
 // A mesh in grid coordinates as text: OBJ ("v column row height", 1-based "f i j k") or JSON
 // ({"vertices":[x,y,z,...],"triangles":[i,j,k,...]}, 0-based), heights as the float the mesher

@@ -173,7 +173,12 @@ async function checkLayer(t, server, dem) {
       assert.equal(dv.meta.level, tile.z, `${name}: .drc level`);
       assert.equal(dv.meta.x, tile.x, `${name}: .drc x`);
       assert.equal(dv.meta.y, tile.y, `${name}: .drc y`);
-      assert.ok(Math.abs(dv.meta.eps_m - eps) <= 1e-9 * eps, `${name}: .drc eps_m ${dv.meta.eps_m} != ${eps}`);
+      // The zoom's eps, or where the tile is meshed on a lattice coarser than the DEM's pixels,
+      // the larger bound it measured (judged below against the tile's own samples too).
+      assert.ok(dv.meta.eps_m >= eps * (1 - 1e-9), `${name}: .drc eps_m ${dv.meta.eps_m} < ${eps}`);
+      if (tile.z === layer.max_zoom) {
+        assert.ok(Math.abs(dv.meta.eps_m - eps) <= 1e-9 * eps, `${name}: .drc eps_m ${dv.meta.eps_m} != ${eps}`);
+      }
       assert.equal(gv.nPoints, dv.nPoints, `${name}: glb and drc vertex counts`);
       assert.equal(gv.nFaces, dv.nFaces, `${name}: glb and drc triangle counts`);
 

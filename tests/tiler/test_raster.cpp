@@ -734,7 +734,10 @@ TEST_CASE("an overview zoom's tile raster is the bilinear interpolation of the o
     GDALRasterBand* band = ds->GetRasterBand(1);
     // With 64-sample tiles zoom 14 is native: pixels_per_sample = 2^(14 - z), and the overview
     // of factor 2049 / width just below it is read, undecimated.
-    const struct { int z, width; } zooms[] = {{13, 1025}, {12, 513}, {11, 257}, {10, 129}};
+    // Zooms whose lattice step spans 8 pixels or more read the summary instead (checked below).
+    const struct { int z, width; } zooms[] = {{13, 1025}, {12, 513}};
+    CHECK(layer->zoom_source(11) == ZoomSource::Summary);
+    CHECK(layer->zoom_source(10) == ZoomSource::Summary);
     for (const auto& zoom : zooms) {
         GDALRasterBand* overview = nullptr;
         for (int k = 0; k < band->GetOverviewCount(); ++k) {
@@ -892,11 +895,13 @@ TEST_CASE(
     REQUIRE_MESSAGE(run("info " + surface, out, err) == 0, err);
     // Zooms 7..12 (256-sample tiles): see the first test case for the levels.
     CHECK(out.find("      12  ") != std::string::npos);
-    // A lon/lat DEM's tiles are meshed on its own pixels at every zoom, overviews or not (they
-    // still serve the raster DEM tiles and lattice tiles of other CRSs: read_level above).
-    CHECK(out.find("guarantee:   by construction") != std::string::npos);
+    // A lon/lat DEM's finest zoom is meshed on its own pixels; zooms whose lattice step spans
+    // 8 pixels or more read the summary, those between read the overviews (read_level above).
+    CHECK(out.find("guarantee:   tiles of the DEM's own zoom are meshed on its pixel centres") !=
+          std::string::npos);
     CHECK(out.find("full resolution (the DEM's pixels)\n") != std::string::npos);
-    CHECK(out.find("overview") == std::string::npos);
+    CHECK(out.find("the summary's planes") != std::string::npos);
+    CHECK(out.find("overview") != std::string::npos);
     CHECK(err.find("gdaladdo") == std::string::npos);
 
     REQUIRE_MESSAGE(run("info " + dir.file("large.tif"), out, err) == 0, err);

@@ -988,11 +988,12 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
     }
     summary.over_eps = static_cast<std::int64_t>(layer->tiles_over_eps());
     if (summary.over_eps > 0) {
-        log::warn("build: " + std::to_string(summary.over_eps) +
-                  " tile(s) measured above their zoom's eps at the source's pixels (resampled "
-                  "from a CRS that is not the scheme's, or globe terrain whose quantization "
-                  "exceeds it, counted once per format); each publishes its measured bound "
-                  "(tileset entry, quantized-mesh metadata, glb asset.extras)");
+        log::info("build: " + std::to_string(summary.over_eps) +
+                  " tile(s) measured above their zoom's eps at the source's pixels (zooms meshed "
+                  "on a lattice coarser than the pixels, sources in another CRS than the "
+                  "scheme's, or globe terrain whose quantization exceeds it; counted once per "
+                  "format); each publishes its measured bound (tileset entry, quantized-mesh "
+                  "metadata, glb asset.extras)");
     }
     summary.seconds = std::chrono::duration<double>(Clock::now() - start).count();
     return summary;

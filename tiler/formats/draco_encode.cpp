@@ -762,14 +762,15 @@ std::string encode_tile(const TileRaster& raster,
                         EncodeReport* report,
                         const std::vector<std::array<double, 3>>* normals,
                         int threads,
-                        const NormalsFn& make_normals) {
+                        const NormalsFn& make_normals,
+                        const std::vector<CheckCell>& cells) {
     const std::size_t n = mesh.vertex_count();
     TB_ASSERT(normals == nullptr || normals->size() == n);
     TB_ASSERT(mesh.z.size() == n && mesh.y.size() == n && mesh.border.size() == n);
     TB_ASSERT(mesh.triangles.size() % 3 == 0);
     if (mesh.triangles.empty()) {
         if (report) {
-            *report = EncodeReport{0, points.size(), budget.drawn_bound};
+            *report = EncodeReport{0, points.size() + cells.size(), budget.drawn_bound};
         }
         return empty_tile(raster, format, budget);
     }
@@ -778,7 +779,8 @@ std::string encode_tile(const TileRaster& raster,
     check_lattice_fits(raster, budget);
     // Where the Draco encoding runs beside the check (speculate; see below), the normals made
     // on demand, which need the mesh alone, start now, beside the positions and the lattice.
-    const bool speculate = threads >= 2 && (format == Format::Glb || points.empty());
+    const bool speculate =
+        threads >= 2 && (format == Format::Glb || (points.empty() && cells.empty()));
     Beside<std::vector<std::array<double, 3>>> normals_ahead;
     if (normals == nullptr && make_normals && speculate) {
         normals_ahead = beside([&make_normals] { return make_normals(); });
@@ -908,8 +910,13 @@ std::string encode_tile(const TileRaster& raster,
         }
     }
     EncodeReport measured = points_error(mesh, grid_world, points);
+    if (!cells.empty()) {
+        const CellsVerdict judged = cells_error(GridSurface{grid_world, mesh.triangles}, cells);
+        measured.points_error = std::max(measured.points_error, judged.error);
+        measured.points_outside += judged.outside;
+    }
     measured.published = budget.drawn_bound;
-    if (!points.empty()) {
+    if (!points.empty() || !cells.empty()) {
         // Rounded up, so the number printed is never below what was measured.
         measured.published = std::max(measured.published,
                                       std::nextafter(measured.points_error + budget.sag,

@@ -3,6 +3,7 @@
 // and the layer's 3D Tiles 1.1 tileset. Draco is included only in tiler/draco_*.cpp.
 #include "core/mesh.hpp"
 #include "tiler/formats/format.hpp"
+#include "tiler/mesh/cell_check.hpp"
 #include "tiler/mesh/tile_mesh.hpp"
 #include "tiler/sources/tile_raster.hpp"
 
@@ -134,6 +135,9 @@ inline constexpr int kNormalBits = 10;
 // Normals made on demand: encode_tile calls it (when no `normals` are given) once, on its second
 // thread beside the check of the drawn surface when it has two.
 using NormalsFn = std::function<std::vector<std::array<double, 3>>()>;
+// `cells`: blocks of source pixels judged as wholes (tiler/mesh/cell_check.hpp), counted with
+// the check points in the report (their bound in points_error, cells no triangle meets in
+// points_outside).
 // `threads` (>= 1) caps the threads encode_tile uses, the calling one included: with two, the
 // Draco encoding runs beside the check of the drawn surface. The bytes are the same for any value.
 std::string encode_tile(const TileRaster& raster,
@@ -144,7 +148,8 @@ std::string encode_tile(const TileRaster& raster,
                         EncodeReport* report = nullptr,
                         const std::vector<std::array<double, 3>>* normals = nullptr,
                         int threads = 1,
-                        const NormalsFn& make_normals = {});
+                        const NormalsFn& make_normals = {},
+                        const std::vector<CheckCell>& cells = {});
 // The core mesh of raster's own lattice (every triangle kept), as to_tile_mesh gives it.
 std::string encode_tile(const TileRaster& raster,
                         const core::Mesh& mesh,

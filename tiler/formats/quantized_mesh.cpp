@@ -245,6 +245,8 @@ QuantizedMesh quantize_mesh(const TileMesh& mesh, const LonLatBox& bounds) {
     // vertices, as its neighbours move too). Vertices on the border lines keep their heights, so
     // that both tiles beside a line draw it alike.
     std::vector<double> z(mesh.z.begin(), mesh.z.end());
+    const double z_lo = n ? *std::min_element(z.begin(), z.end()) : 0;
+    const double z_hi = n ? *std::max_element(z.begin(), z.end()) : 0;
     std::vector<std::uint32_t> start(n + 1, 0), fan(mesh.triangles.size());
     for (core::Index i : mesh.triangles) {
         ++start[i + 1];
@@ -283,9 +285,13 @@ QuantizedMesh quantize_mesh(const TileMesh& mesh, const LonLatBox& bounds) {
                 if (wa < 0 || wb < 0 || wc < 0) {
                     continue;
                 }
-                // Only where the vertex carries most of the point (near it, as a half step is).
+                // Only where the vertex carries most of the point (near it, as a half step is),
+                // and within the mesh's own heights: on a coarse tile a step is hundreds of
+                // metres, and the height that would put the surface back can lie far outside
+                // them (7,766 m on a zoom-0 tile of a DEM below 1,900 m), and outside the
+                // bounding volumes the tilesets publish. What is left is measured.
                 if (wa > 0.5) {
-                    z[i] = (mesh.z[i] - wb * z[b] - wc * z[c]) / wa;
+                    z[i] = std::clamp((mesh.z[i] - wb * z[b] - wc * z[c]) / wa, z_lo, z_hi);
                 }
                 break;
             }
@@ -348,6 +354,12 @@ public:
         }
     }
 
+    // The handle of the first check point (samples come before).
+    std::size_t first_point() const {
+        return static_cast<std::size_t>(raster_.grid.width) *
+               static_cast<std::size_t>(raster_.grid.height);
+    }
+
     Probe at(std::size_t handle) const {
         const auto w = static_cast<std::size_t>(raster_.grid.width);
         const std::size_t first = w * static_cast<std::size_t>(raster_.grid.height);
@@ -380,6 +392,24 @@ private:
     std::vector<double> lon_, lat_;
 };
 
+// The cells' bound (cell_check.hpp) on a surface mesh, its vertices taken to raster's grid.
+CellsVerdict surface_cells_error(const SurfaceMesh& q,
+                                 const TileRaster& raster,
+                                 const std::vector<CheckCell>& cells) {
+    if (cells.empty()) {
+        return {};
+    }
+    const LonLatBox& b = q.bounds;
+    std::vector<std::array<double, 3>> grid(q.u.size());
+    for (std::size_t i = 0; i < q.u.size(); ++i) {
+        const LonLat p{b.west + q.u[i] / kQuantizedMax * (b.east - b.west),
+                       b.south + q.v[i] / kQuantizedMax * (b.north - b.south)};
+        lonlat_to_grid(raster, p, grid[i][0], grid[i][1]);
+        grid[i][2] = q.h[i];
+    }
+    return cells_error(GridSurface{grid, q.triangles}, cells);
+}
+
 double worst_error(const SurfaceMesh& q, const Probes& probes, std::size_t* missed) {
     const TriangleBuckets buckets(q);
     double worst = 0;
@@ -403,15 +433,18 @@ double worst_error(const SurfaceMesh& q, const Probes& probes, std::size_t* miss
 double quantized_error(const QuantizedMesh& q,
                        const TileRaster& raster,
                        const std::vector<CheckPoint>& points,
-                       std::size_t* uncovered) {
-    return worst_error(to_surface(q), Probes(q.bounds, raster, points), uncovered);
+                       std::size_t* uncovered,
+                       const std::vector<CheckCell>& cells) {
+    return surface_error(to_surface(q), raster, points, uncovered, cells);
 }
 
 double surface_error(const SurfaceMesh& mesh,
                      const TileRaster& raster,
                      const std::vector<CheckPoint>& points,
-                     std::size_t* uncovered) {
-    return worst_error(mesh, Probes(mesh.bounds, raster, points), uncovered);
+                     std::size_t* uncovered,
+                     const std::vector<CheckCell>& cells) {
+    const double error = worst_error(mesh, Probes(mesh.bounds, raster, points), uncovered);
+    return std::max(error, surface_cells_error(mesh, raster, cells).error);
 }
 
 QuantizedMesh quantize_within(TileMesh& mesh,
@@ -420,7 +453,8 @@ QuantizedMesh quantize_within(TileMesh& mesh,
                               const std::vector<CheckPoint>& points,
                               double allowed,
                               double& error,
-                              std::size_t* uncovered) {
+                              std::size_t* uncovered,
+                              const std::vector<CheckCell>& cells) {
     const Probes probes(bounds, raster, points);
     constexpr int kRounds = 8;
     constexpr double kClear = 1e-3; // a weight below this puts the sample on an edge
@@ -448,8 +482,12 @@ QuantizedMesh quantize_within(TileMesh& mesh,
             }
             error = std::max(error, e);
             const int on_edges = (w[0] < kClear) + (w[1] < kClear) + (w[2] < kClear);
-            const bool movable = p.lon != bounds.west && p.lon != bounds.east &&
-                                 p.lat != bounds.south && p.lat != bounds.north && on_edges < 2;
+            // Check points (source pixels off the lattice) are measured, never made vertices:
+            // a lattice coarser than the pixels misses them by its own coarseness, which
+            // inserting pixel after pixel cannot mend (a zoom-7 tile grew to 384,409 triangles).
+            const bool movable = k < probes.first_point() && p.lon != bounds.west &&
+                                 p.lon != bounds.east && p.lat != bounds.south &&
+                                 p.lat != bounds.north && on_edges < 2;
             if (e > allowed && e > worst[t].error && movable) {
                 worst[t] = {e, k, w};
             }
@@ -464,6 +502,8 @@ QuantizedMesh quantize_within(TileMesh& mesh,
             }
         }
         if (error <= allowed || round + 1 == kRounds || order.empty()) {
+            // The cells add no vertex (no single pixel stands for them): measured once, here.
+            error = std::max(error, surface_cells_error(to_surface(q), raster, cells).error);
             return q;
         }
         std::sort(order.begin(), order.end(), [&worst](std::uint32_t a, std::uint32_t b) {

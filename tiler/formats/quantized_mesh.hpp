@@ -60,22 +60,27 @@ SurfaceMesh to_surface(const QuantizedMesh& q);
 // points, the drawn surface being the quantized triangles interpolated linearly in lon/lat (the
 // chord sag of straight ECEF triangles comes on top). `uncovered`, when given, counts samples no
 // quantized triangle holds (they are left out of the maximum).
+// `cells` (tiler/mesh/cell_check.hpp) are judged too, their bound taken into the maximum.
 double quantized_error(const QuantizedMesh& q,
                        const TileRaster& raster,
                        const std::vector<CheckPoint>& points,
-                       std::size_t* uncovered = nullptr);
+                       std::size_t* uncovered = nullptr,
+                       const std::vector<CheckCell>& cells = {});
 
 // quantized_error of any surface mesh.
 double surface_error(const SurfaceMesh& mesh,
                      const TileRaster& raster,
                      const std::vector<CheckPoint>& points,
-                     std::size_t* uncovered = nullptr);
+                     std::size_t* uncovered = nullptr,
+                     const std::vector<CheckCell>& cells = {});
 
 // quantize_mesh, refined until the quantized surface is within `allowed` of every valid sample
 // of raster.grid and every check point: each round splits every triangle whose worst sample is
 // past `allowed` in three at that sample (a new vertex with the sample's height; samples on the
 // tile's border lines or on a triangle's edge are not used, so the border lines keep their
-// vertices and neighbouring tiles still share them), at most 8 rounds. `mesh` gets the new
+// vertices and neighbouring tiles still share them; check points are measured but never made
+// vertices), at most 8 rounds. `cells` add no vertex:
+// their bound is measured on the final surface and taken into `error`. `mesh` gets the new
 // vertices; `error` is the final largest |drawn - sample| (as quantized_error).
 QuantizedMesh quantize_within(TileMesh& mesh,
                               const LonLatBox& bounds,
@@ -83,7 +88,8 @@ QuantizedMesh quantize_within(TileMesh& mesh,
                               const std::vector<CheckPoint>& points,
                               double allowed,
                               double& error,
-                              std::size_t* uncovered = nullptr);
+                              std::size_t* uncovered = nullptr,
+                              const std::vector<CheckCell>& cells = {});
 
 struct QuantizedMeshExtras {
     std::vector<std::array<double, 3>> normals; // unit ECEF normal per mesh vertex; empty: none

@@ -318,8 +318,12 @@ PixelTile make_pixel_tile(const DemSource& source,
     return t;
 }
 
-TileMesh mesh_pixel_tile(
-    const PixelTile& t, const ErrorBudget& budget, bool drop_voids, int threads, bool check_error) {
+TileMesh mesh_pixel_tile(const PixelTile& t,
+                         const ErrorBudget& budget,
+                         bool drop_voids,
+                         int threads,
+                         bool check_error,
+                         core::Effort effort) {
     const core::HeightGrid& grid = t.raster.grid;
     const int w = grid.width, h = grid.height;
     TB_ASSERT(budget.max_edge == 0 || budget.max_edge >= kMinPixelEdge - 1e-12);
@@ -408,7 +412,8 @@ TileMesh mesh_pixel_tile(
                                      .lock_border = true,
                                      .max_edge = core_edge,
                                      .check_error = check_error,
-                                     .huge_pages = false},
+                                     .huge_pages = false,
+                                     .effort = effort},
             2,
             threads,
             run_on_helper);

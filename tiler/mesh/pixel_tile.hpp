@@ -78,6 +78,7 @@ TileMesh mesh_pixel_tile(const PixelTile& tile,
                          const ErrorBudget& budget,
                          bool drop_voids = true,
                          int threads = 2,
-                         bool check_error = true);
+                         bool check_error = true,
+                         core::Effort effort = core::Effort::Balanced);
 
 } // namespace tb::tiler

@@ -1,0 +1,201 @@
+// The multi-resolution summary and the cell check, against brute force: every pixel of every
+// block lies within its block's plane and range, and the cell check bounds every pixel under a
+// drawn surface.
+#include "tests/tiler/test_raster_util.hpp"
+#include "tiler/mesh/cell_check.hpp"
+#include "tiler/sources/geoid.hpp"
+#include "tiler/summary/dem_summary.hpp"
+
+#include <doctest/doctest.h>
+
+#include <cmath>
+#include <random>
+
+using namespace tb::tiler;
+
+namespace {
+
+// A drawn surface over [0, n] x [0, n]: a grid of cells each cut by a random diagonal, random
+// heights, some vertices moved off the lattice (as quantization moves them).
+struct Surface {
+    std::vector<std::array<double, 3>> vertices;
+    std::vector<std::uint32_t> triangles;
+};
+
+Surface random_surface(int n, std::mt19937& rng) {
+    std::uniform_real_distribution<double> h(-50, 50), jiggle(-0.3, 0.3);
+    Surface s;
+    for (int j = 0; j <= n; ++j) {
+        for (int i = 0; i <= n; ++i) {
+            const bool inner = i > 0 && j > 0 && i < n && j < n;
+            s.vertices.push_back(
+                {i + (inner ? jiggle(rng) : 0.0), j + (inner ? jiggle(rng) : 0.0), h(rng)});
+        }
+    }
+    const auto at = [n](int i, int j) { return static_cast<std::uint32_t>(j * (n + 1) + i); };
+    for (int j = 0; j < n; ++j) {
+        for (int i = 0; i < n; ++i) {
+            if (rng() % 2) {
+                s.triangles.insert(s.triangles.end(), {at(i, j), at(i + 1, j), at(i + 1, j + 1)});
+                s.triangles.insert(s.triangles.end(), {at(i, j), at(i + 1, j + 1), at(i, j + 1)});
+            } else {
+                s.triangles.insert(s.triangles.end(), {at(i, j), at(i + 1, j), at(i, j + 1)});
+                s.triangles.insert(s.triangles.end(), {at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)});
+            }
+        }
+    }
+    return s;
+}
+
+// The drawn height at (x, y): the first triangle holding it (barycentric, with a hair).
+bool drawn_at(const Surface& s, double x, double y, double& out) {
+    for (std::size_t t = 0; t < s.triangles.size(); t += 3) {
+        const auto& a = s.vertices[s.triangles[t]];
+        const auto& b = s.vertices[s.triangles[t + 1]];
+        const auto& c = s.vertices[s.triangles[t + 2]];
+        const double det = (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1]);
+        const double la = ((b[0] - x) * (c[1] - y) - (c[0] - x) * (b[1] - y)) / det;
+        const double lb = ((c[0] - x) * (a[1] - y) - (a[0] - x) * (c[1] - y)) / det;
+        const double lc = 1 - la - lb;
+        if (la >= -1e-12 && lb >= -1e-12 && lc >= -1e-12) {
+            out = la * a[2] + lb * b[2] + lc * c[2];
+            return true;
+        }
+    }
+    return false;
+}
+
+} // namespace
+
+TEST_CASE("the cell check bounds every pixel of every cell under a drawn surface (seeds 1-20)") {
+    for (unsigned seed = 1; seed <= 20; ++seed) {
+        CAPTURE(seed);
+        std::mt19937 rng(seed);
+        const int n = 6;
+        const Surface s = random_surface(n, rng);
+        // Pixels on a fine grid, grouped in blocks of 5 x 5 pixels with a random plane each.
+        std::uniform_real_distribution<double> slope(-20, 20), rough(-3, 3);
+        const double step = 0.13;
+        const int px = static_cast<int>(n / step);
+        std::vector<CheckCell> cells;
+        double brute = 0;
+        for (int by = 0; by * 5 < px; ++by) {
+            for (int bx = 0; bx * 5 < px; ++bx) {
+                CheckCell c;
+                c.x0 = bx * 5 * step, c.y0 = by * 5 * step;
+                c.x1 = std::min(bx * 5 + 4, px - 1) * step, c.y1 = std::min(by * 5 + 4, px - 1) * step;
+                c.height = slope(rng), c.per_column = slope(rng), c.per_row = slope(rng);
+                std::vector<std::array<double, 3>> pixels;
+                for (int j = by * 5; j <= std::min(by * 5 + 4, px - 1); ++j) {
+                    for (int i = bx * 5; i <= std::min(bx * 5 + 4, px - 1); ++i) {
+                        const double x = i * step, y = j * step;
+                        const double h = c.reference(x, y) + rough(rng);
+                        c.half = std::max(c.half, std::abs(h - c.reference(x, y)));
+                        pixels.push_back({x, y, h});
+                    }
+                }
+                cells.push_back(c);
+                for (const auto& p : pixels) {
+                    double d = 0;
+                    REQUIRE(drawn_at(s, p[0], p[1], d));
+                    brute = std::max(brute, std::abs(d - p[2]));
+                }
+            }
+        }
+        const CellsVerdict v = cells_error(GridSurface{s.vertices, s.triangles}, cells);
+        CHECK(v.outside == 0);
+        CHECK(brute <= v.error);
+    }
+}
+
+TEST_CASE("the cell check of single pixels is the brute-force error, exactly") {
+    std::mt19937 rng(5);
+    const Surface s = random_surface(5, rng);
+    std::uniform_real_distribution<double> where(0, 5), h(-60, 60);
+    std::vector<CheckCell> cells;
+    double brute = 0;
+    for (int k = 0; k < 400; ++k) {
+        CheckCell c;
+        c.x0 = c.x1 = where(rng);
+        c.y0 = c.y1 = where(rng);
+        c.height = h(rng);
+        double d = 0;
+        REQUIRE(drawn_at(s, c.x0, c.y0, d));
+        brute = std::max(brute, std::abs(d - c.height));
+        cells.push_back(c);
+    }
+    const CellsVerdict v = cells_error(GridSurface{s.vertices, s.triangles}, cells);
+    CHECK(v.error == doctest::Approx(brute).epsilon(1e-9));
+    // A cell beyond the surface is met by no triangle.
+    CheckCell far;
+    far.x0 = far.x1 = 40, far.y0 = far.y1 = 40;
+    cells.push_back(far);
+    CHECK(cells_error(GridSurface{s.vertices, s.triangles}, cells).outside == 1);
+}
+
+TEST_CASE("every valid pixel of a DEM lies within its summary block's plane and range, at every "
+          "level") {
+    tb_test::ScratchDir dir;
+    tb_test::Fixture f;
+    f.width = 301, f.height = 203; // not a multiple of any block
+    f.values.resize(static_cast<std::size_t>(f.width) * f.height);
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<double> noise(0, 9);
+    for (int j = 0; j < f.height; ++j) {
+        for (int i = 0; i < f.width; ++i) {
+            double h = 800 + 3 * i - 2 * j + 300 * std::sin(i / 17.0) * std::cos(j / 11.0) +
+                       noise(rng);
+            if (std::hypot(i - 120, j - 90) < 30 || (i > 250 && j < 20)) {
+                h = -32768;
+            }
+            f.values[static_cast<std::size_t>(j) * f.width + i] = h;
+        }
+    }
+    f.type = GDT_Int16;
+    f.nodata = -32768;
+    f.geotransform = std::array<double, 6>{7.6, 1.0 / 1200, 0, 46.4, 0, -1.0 / 1200};
+    f.epsg = 4326;
+    const std::string path = tb_test::write_fixture(dir.file("dem.tif"), f);
+    const auto source = DemSource::open({path});
+    const auto grid = source->pixel_grid(Scheme::Geodetic);
+    REQUIRE(grid);
+    for (const VerticalDatum datum : {VerticalDatum::Egm96, VerticalDatum::Ellipsoid}) {
+        CAPTURE(to_string(datum));
+        const DemSummary s = DemSummary::build(*source, *grid, datum);
+        CHECK(s.coarsest_level() == 9); // one block holds all 301 columns
+        const std::vector<double> px = source->read_pixels(0, 0, f.width, f.height);
+        for (int level = s.finest_level(); level <= s.coarsest_level(); ++level) {
+            CAPTURE(level);
+            double widest = 0;
+            std::size_t checked = 0;
+            for (std::int64_t j = 0; j < f.height; ++j) {
+                for (std::int64_t i = 0; i < f.width; ++i) {
+                    double h = px[static_cast<std::size_t>(j * f.width + i)];
+                    if (std::isnan(h)) {
+                        continue;
+                    }
+                    if (datum == VerticalDatum::Egm96) {
+                        h += egm96_undulation(grid->x(i), grid->y(j));
+                    }
+                    const SummaryBlock* b = s.block(level, i >> level, j >> level);
+                    REQUIRE(b != nullptr);
+                    REQUIRE_FALSE(b->empty());
+                    const double r =
+                        h - DemSummary::plane(*b, level, i >> level, j >> level, double(i), double(j));
+                    CHECK(r >= b->low);
+                    CHECK(r <= b->high);
+                    widest = std::max(widest, static_cast<double>(b->high) - b->low);
+                    ++checked;
+                }
+            }
+            CHECK(checked > 50000);
+            // The planes follow the slope: the ranges stay near the relief left over, far
+            // below the DEM's own relief (about 1,900 m).
+            if (level == s.finest_level()) {
+                CHECK(widest < 150);
+            }
+        }
+        // A block of voids only is empty.
+        CHECK(s.block(3, 32, 1)->empty());
+    }
+}

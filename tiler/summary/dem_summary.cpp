@@ -1,0 +1,257 @@
+// The multi-resolution summary (see dem_summary.hpp): planes and exact residual ranges per
+// block, fitted to the pixels at the finest level and to the children's planes above it.
+#include "tiler/summary/dem_summary.hpp"
+
+#include "core/error.hpp"
+#include "tiler/log.hpp"
+#include "tiler/sources/geoid.hpp"
+
+#include <algorithm>
+#include <limits>
+
+namespace tb::tiler {
+namespace {
+
+// Least-squares plane h = a + b u + c v through weighted points, from their moments.
+struct Moments {
+    double n = 0, su = 0, sv = 0, sh = 0, suu = 0, suv = 0, svv = 0, suh = 0, svh = 0;
+    void add(double u, double v, double h) {
+        n += 1, su += u, sv += v, sh += h;
+        suu += u * u, suv += u * v, svv += v * v, suh += u * h, svh += v * h;
+    }
+    // The plane through the points' centroid; flat (b = c = 0) where they do not span a plane
+    // (one point, or all on a line), which any plane may stand for: the range makes it true.
+    void solve(double& a, double& b, double& c) const {
+        const double mu = su / n, mv = sv / n, mh = sh / n;
+        const double cuu = suu / n - mu * mu, cuv = suv / n - mu * mv, cvv = svv / n - mv * mv;
+        const double cuh = suh / n - mu * mh, cvh = svh / n - mv * mh;
+        const double det = cuu * cvv - cuv * cuv;
+        b = c = 0;
+        if (det > 1e-9 * std::max(1.0, cuu * cvv)) {
+            b = (cuh * cvv - cvh * cuv) / det;
+            c = (cvh * cuu - cuh * cuv) / det;
+        }
+        a = mh - b * mu - c * mv;
+    }
+};
+
+// The range [lo, hi] widened to floats that hold it, with a hair for the double arithmetic
+// that evaluates a plane in different orders.
+void set_range(SummaryBlock& block, double lo, double hi) {
+    const double pad = 1e-6 + 1e-12 * std::max(std::abs(lo), std::abs(hi));
+    lo -= pad, hi += pad;
+    float l = static_cast<float>(lo), h = static_cast<float>(hi);
+    if (static_cast<double>(l) > lo) {
+        l = std::nextafter(l, -std::numeric_limits<float>::infinity());
+    }
+    if (static_cast<double>(h) < hi) {
+        h = std::nextafter(h, std::numeric_limits<float>::infinity());
+    }
+    block.low = l, block.high = h;
+}
+
+constexpr SummaryBlock kEmpty{0, 0, 0, 1, 0};
+
+} // namespace
+
+std::int64_t DemSummary::blocks_across(int level) const {
+    const std::int64_t side = std::int64_t{1} << level;
+    return (width_ + side - 1) / side;
+}
+
+std::int64_t DemSummary::blocks_down(int level) const {
+    const std::int64_t side = std::int64_t{1} << level;
+    return (height_ + side - 1) / side;
+}
+
+std::int64_t DemSummary::last_column(int level, std::int64_t bx) const {
+    return std::min<std::int64_t>(((bx + 1) << level) - 1, width_ - 1);
+}
+
+std::int64_t DemSummary::last_row(int level, std::int64_t by) const {
+    return std::min<std::int64_t>(((by + 1) << level) - 1, height_ - 1);
+}
+
+const SummaryBlock* DemSummary::block(int level, std::int64_t bx, std::int64_t by) const {
+    TB_ASSERT(level >= finest_level() && level <= coarsest_level());
+    if (bx < 0 || by < 0 || bx >= blocks_across(level) || by >= blocks_down(level)) {
+        return nullptr;
+    }
+    return &levels_[static_cast<std::size_t>(level - kFinestLevel)]
+                   [static_cast<std::size_t>(by * blocks_across(level) + bx)];
+}
+
+std::size_t DemSummary::bytes() const {
+    std::size_t total = 0;
+    for (const auto& level : levels_) {
+        total += level.size() * sizeof(SummaryBlock);
+    }
+    return total;
+}
+
+namespace {
+
+// One block of the finest level from its pixels (heights ellipsoidal, NaN for voids), `px` the
+// strip read, `row0` its first row, `w` its width.
+SummaryBlock fit_pixels(const std::vector<double>& px,
+                        int w,
+                        std::int64_t row0,
+                        std::int64_t bx,
+                        std::int64_t by,
+                        std::int64_t last_col,
+                        std::int64_t last_row) {
+    constexpr int k = kFinestLevel;
+    const double ci = DemSummary::centre(k, bx), cj = DemSummary::centre(k, by);
+    const auto at = [&](std::int64_t i, std::int64_t j) {
+        return px[static_cast<std::size_t>((j - row0) * w + i)];
+    };
+    Moments m;
+    for (std::int64_t j = by << k; j <= last_row; ++j) {
+        for (std::int64_t i = bx << k; i <= last_col; ++i) {
+            const double h = at(i, j);
+            if (!std::isnan(h)) {
+                m.add(static_cast<double>(i) - ci, static_cast<double>(j) - cj, h);
+            }
+        }
+    }
+    if (m.n == 0) {
+        return kEmpty;
+    }
+    double a = 0, b = 0, c = 0;
+    m.solve(a, b, c);
+    SummaryBlock block{static_cast<float>(a), static_cast<float>(b), static_cast<float>(c), 0, 0};
+    double lo = INFINITY, hi = -INFINITY;
+    for (std::int64_t j = by << k; j <= last_row; ++j) {
+        for (std::int64_t i = bx << k; i <= last_col; ++i) {
+            const double h = at(i, j);
+            if (!std::isnan(h)) {
+                const double r = h - DemSummary::plane(block, k, bx, by, double(i), double(j));
+                lo = std::min(lo, r), hi = std::max(hi, r);
+            }
+        }
+    }
+    set_range(block, lo, hi);
+    return block;
+}
+
+} // namespace
+
+// One block of level `level` from its children at level - 1 (see the header).
+SummaryBlock DemSummary::fit_children(int level, std::int64_t bx, std::int64_t by) const {
+    const int child = level - 1;
+    struct Corner {
+        double i, j, h;
+    };
+    std::vector<Corner> corners;
+    corners.reserve(16);
+    std::array<std::pair<std::int64_t, std::int64_t>, 4> kids{};
+    int count = 0;
+    for (int q = 0; q < 4; ++q) {
+        const std::int64_t cx = 2 * bx + (q & 1), cy = 2 * by + (q >> 1);
+        const SummaryBlock* c = block(child, cx, cy);
+        if (c == nullptr || c->empty()) {
+            continue;
+        }
+        kids[static_cast<std::size_t>(count++)] = {cx, cy};
+        for (int r = 0; r < 4; ++r) {
+            const double i = static_cast<double>((r & 1) ? last_column(child, cx) : cx << child);
+            const double j = static_cast<double>((r >> 1) ? last_row(child, cy) : cy << child);
+            corners.push_back({i, j, plane(*c, child, cx, cy, i, j)});
+        }
+    }
+    if (count == 0) {
+        return kEmpty;
+    }
+    const double ci = centre(level, bx), cj = centre(level, by);
+    Moments m;
+    for (const Corner& c : corners) {
+        m.add(c.i - ci, c.j - cj, c.h);
+    }
+    double a = 0, b = 0, c = 0;
+    m.solve(a, b, c);
+    SummaryBlock out{static_cast<float>(a), static_cast<float>(b), static_cast<float>(c), 0, 0};
+    double lo = INFINITY, hi = -INFINITY;
+    for (int q = 0; q < count; ++q) {
+        const SummaryBlock& kid = *block(child, kids[static_cast<std::size_t>(q)].first,
+                                         kids[static_cast<std::size_t>(q)].second);
+        for (int r = 0; r < 4; ++r) {
+            const Corner& p = corners[static_cast<std::size_t>(4 * q + r)];
+            const double d = p.h - plane(out, level, bx, by, p.i, p.j);
+            lo = std::min(lo, d + static_cast<double>(kid.low));
+            hi = std::max(hi, d + static_cast<double>(kid.high));
+        }
+    }
+    set_range(out, lo, hi);
+    return out;
+}
+
+DemSummary DemSummary::build(const DemSource& source, const PixelGrid& grid, VerticalDatum datum) {
+    DemSummary s;
+    s.width_ = grid.width;
+    s.height_ = grid.height;
+    const std::string& path = source.info().path;
+    log::info(path + ": making its multi-resolution summary (" + std::to_string(grid.width) +
+              " x " + std::to_string(grid.height) + " pixels)");
+    std::vector<Egm96Column> columns;
+    if (datum == VerticalDatum::Egm96) {
+        columns.resize(static_cast<std::size_t>(grid.width));
+        for (int i = 0; i < grid.width; ++i) {
+            columns[static_cast<std::size_t>(i)] = egm96_column(s.lon_of(grid, i, 0));
+        }
+    }
+    constexpr int kStripRows = 32 << kFinestLevel;
+    const std::int64_t across = s.blocks_across(kFinestLevel);
+    auto& finest = s.levels_.emplace_back();
+    finest.reserve(static_cast<std::size_t>(across * s.blocks_down(kFinestLevel)));
+    int reported = 0;
+    for (std::int64_t row0 = 0; row0 < grid.height; row0 += kStripRows) {
+        const int rows = static_cast<int>(std::min<std::int64_t>(kStripRows, grid.height - row0));
+        std::vector<double> px = source.read_pixels(0, row0, grid.width, rows);
+        if (datum == VerticalDatum::Egm96) {
+            for (int j = 0; j < rows; ++j) {
+                const Egm96Row r = egm96_row(s.lat_of(grid, 0, row0 + j));
+                for (int i = 0; i < grid.width; ++i) {
+                    double& h = px[static_cast<std::size_t>(j) * grid.width + i];
+                    h += egm96_at(columns[static_cast<std::size_t>(i)], r);
+                }
+            }
+        }
+        for (std::int64_t by = row0 >> kFinestLevel; by < (row0 + rows + 7) >> kFinestLevel; ++by) {
+            for (std::int64_t bx = 0; bx < across; ++bx) {
+                finest.push_back(fit_pixels(px, grid.width, row0, bx, by,
+                                            s.last_column(kFinestLevel, bx),
+                                            s.last_row(kFinestLevel, by)));
+            }
+        }
+        const int percent = static_cast<int>(100 * (row0 + rows) / grid.height);
+        if (percent >= reported + 10 || row0 + rows == grid.height) {
+            reported = percent;
+            log::info(path + ": summary " + std::to_string(percent) + " % read");
+        }
+    }
+    for (int level = kFinestLevel + 1;
+         s.blocks_across(level - 1) > 1 || s.blocks_down(level - 1) > 1; ++level) {
+        std::vector<SummaryBlock> blocks;
+        blocks.reserve(static_cast<std::size_t>(s.blocks_across(level) * s.blocks_down(level)));
+        for (std::int64_t by = 0; by < s.blocks_down(level); ++by) {
+            for (std::int64_t bx = 0; bx < s.blocks_across(level); ++bx) {
+                blocks.push_back(s.fit_children(level, bx, by));
+            }
+        }
+        s.levels_.push_back(std::move(blocks));
+    }
+    log::info(path + ": summary ready, levels " + std::to_string(s.finest_level()) + ".." +
+              std::to_string(s.coarsest_level()) + ", " +
+              std::to_string(s.bytes() / 1024) + " KiB");
+    return s;
+}
+
+double DemSummary::lon_of(const PixelGrid& grid, std::int64_t i, std::int64_t j) {
+    return grid.lonlat ? grid.x(i) : native_to_lonlat(Scheme::Mercator, grid.x(i), grid.y(j)).lon;
+}
+
+double DemSummary::lat_of(const PixelGrid& grid, std::int64_t i, std::int64_t j) {
+    return grid.lonlat ? grid.y(j) : native_to_lonlat(Scheme::Mercator, grid.x(i), grid.y(j)).lat;
+}
+
+} // namespace tb::tiler

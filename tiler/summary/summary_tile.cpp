@@ -1,0 +1,135 @@
+// Coarse tiles from the summary: lattice heights off the blocks' planes, blocks as CheckCells.
+#include "tiler/summary/summary_tile.hpp"
+
+#include "tiler/sources/geoid.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace tb::tiler {
+namespace {
+
+// Source pixel coordinates (fractional column, row) of a native point of `scheme`.
+void to_pixel(const PixelGrid& g, Scheme scheme, double x, double y, double& i, double& j) {
+    if (g.lonlat) {
+        const LonLat p = native_to_lonlat(scheme, x, y);
+        x = p.lon, y = p.lat;
+    }
+    i = (x - g.x0) / g.dx - 0.5;
+    j = (g.y0 - y) / g.dy - 0.5;
+}
+
+} // namespace
+
+bool summary_serves(const PixelGrid& grid, Scheme scheme) {
+    return grid.lonlat == (scheme == Scheme::Geodetic);
+}
+
+double pixels_per_step(const PixelGrid& grid, Scheme scheme, int z, int size) {
+    const double step = lattice_x(scheme, z, size, 1) - lattice_x(scheme, z, size, 0);
+    return step / std::max(grid.dx, grid.dy);
+}
+
+int summary_level(const DemSummary& summary, const PixelGrid& grid, Scheme scheme, int z, int size) {
+    const double pps = pixels_per_step(grid, scheme, z, size);
+    const int level = static_cast<int>(std::floor(std::log2(pps) + 1e-9));
+    if (level < summary.finest_level()) {
+        return -1;
+    }
+    return std::min(level, summary.coarsest_level());
+}
+
+LatticeBlock summary_lattice(const DemSummary& summary,
+                             const PixelGrid& grid,
+                             VerticalDatum datum,
+                             Scheme scheme,
+                             int z,
+                             int size,
+                             int level,
+                             std::int64_t column0,
+                             std::int64_t row0,
+                             int width,
+                             int height) {
+    LatticeBlock out;
+    out.column0 = column0, out.row0 = row0, out.width = width, out.height = height;
+    const std::size_t count = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
+    out.heights.assign(count, 0.0);
+    out.valid.assign(count, 0);
+    for (int r = 0; r < height; ++r) {
+        const double y = lattice_y(scheme, z, size, row0 + r);
+        for (int c = 0; c < width; ++c) {
+            const double x = lattice_x(scheme, z, size, column0 + c);
+            double i = 0, j = 0;
+            to_pixel(grid, scheme, x, y, i, j);
+            if (!(i >= -0.5 && j >= -0.5 && i <= grid.width - 0.5 && j <= grid.height - 0.5)) {
+                continue;
+            }
+            const auto col = std::clamp<std::int64_t>(std::llround(i), 0, grid.width - 1);
+            const auto row = std::clamp<std::int64_t>(std::llround(j), 0, grid.height - 1);
+            const std::int64_t bx = col >> level, by = row >> level;
+            const SummaryBlock* b = summary.block(level, bx, by);
+            if (b == nullptr || b->empty()) {
+                continue;
+            }
+            // The least-squares plane, not the middle of the block's range: at coarse levels
+            // the range spans the block's whole relief, often lopsided, and its middle can lie
+            // far above or below every pixel near the point (7,766 m over a DEM below 1,900 m).
+            double h = DemSummary::plane(*b, level, bx, by, i, j);
+            if (datum == VerticalDatum::Egm96) {
+                const LonLat p = native_to_lonlat(scheme, x, y);
+                h -= egm96_undulation(p.lon, p.lat);
+            }
+            const std::size_t k = static_cast<std::size_t>(r) * width + c;
+            out.heights[k] = h;
+            out.valid[k] = 1;
+        }
+    }
+    return out;
+}
+
+std::vector<CheckCell> summary_cells(const DemSummary& summary,
+                                     const PixelGrid& grid,
+                                     const TileRaster& raster,
+                                     int level) {
+    const GridFrame f = frame_of(raster);
+    // The tile's box in pixel coordinates, then the pixel centres inside it (closed).
+    double i_west = 0, j_north = 0, i_east = 0, j_south = 0;
+    to_pixel(grid, raster.scheme, f.x0, f.y0, i_west, j_north);
+    to_pixel(grid, raster.scheme, f.x0 + f.dx * (raster.grid.width - 1),
+             f.y0 - f.dy * (raster.grid.height - 1), i_east, j_south);
+    const auto i0 = std::max<std::int64_t>(static_cast<std::int64_t>(std::ceil(i_west)), 0);
+    const auto j0 = std::max<std::int64_t>(static_cast<std::int64_t>(std::ceil(j_north)), 0);
+    const auto i1 = std::min<std::int64_t>(static_cast<std::int64_t>(std::floor(i_east)),
+                                           grid.width - 1);
+    const auto j1 = std::min<std::int64_t>(static_cast<std::int64_t>(std::floor(j_south)),
+                                           grid.height - 1);
+    std::vector<CheckCell> cells;
+    if (i0 > i1 || j0 > j1) {
+        return cells;
+    }
+    // Pixel (i, j) in grid coordinates: affine on both axes (summary_serves).
+    const double sx = grid.dx / f.dx, sy = grid.dy / f.dy;
+    const double gx0 = (grid.x(0) - f.x0) / f.dx, gy0 = (f.y0 - grid.y(0)) / f.dy;
+    for (std::int64_t by = j0 >> level; by <= j1 >> level; ++by) {
+        for (std::int64_t bx = i0 >> level; bx <= i1 >> level; ++bx) {
+            const SummaryBlock* b = summary.block(level, bx, by);
+            if (b == nullptr || b->empty()) {
+                continue;
+            }
+            const auto ia = std::max(bx << level, i0), ib = std::min(summary.last_column(level, bx), i1);
+            const auto ja = std::max(by << level, j0), jb = std::min(summary.last_row(level, by), j1);
+            CheckCell c;
+            c.x0 = gx0 + static_cast<double>(ia) * sx, c.x1 = gx0 + static_cast<double>(ib) * sx;
+            c.y0 = gy0 + static_cast<double>(ja) * sy, c.y1 = gy0 + static_cast<double>(jb) * sy;
+            c.height = DemSummary::plane(*b, level, bx, by, double(ia), double(ja)) +
+                       (static_cast<double>(b->low) + b->high) / 2;
+            c.per_column = static_cast<double>(b->per_column) / sx;
+            c.per_row = static_cast<double>(b->per_row) / sy;
+            c.half = (static_cast<double>(b->high) - b->low) / 2 + 1e-6;
+            cells.push_back(c);
+        }
+    }
+    return cells;
+}
+
+} // namespace tb::tiler

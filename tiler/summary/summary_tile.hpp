@@ -1,0 +1,51 @@
+#pragma once
+// A coarse tile read from the DEM's summary (dem_summary.hpp) instead of its pixels: the zoom's
+// lattice of samples, each read off the plane of the summary block it lies in, and the blocks
+// under the tile as CheckCells, so the drawn tile is judged against every valid pixel without
+// reading one. The work per tile is about its own number of samples, whatever the zoom.
+#include "tiler/mesh/cell_check.hpp"
+#include "tiler/sources/gdal_source.hpp"
+#include "tiler/summary/dem_summary.hpp"
+
+#include <cstdint>
+#include <vector>
+
+namespace tb::tiler {
+
+// True when the summary can serve `scheme`'s tiles of a source on `grid`: the pixel grid and
+// the scheme's lattice are scaled copies of each other along both axes (a lon/lat grid for the
+// geodetic scheme, an EPSG:3857 grid for mercator), so a block's plane stays a plane in the
+// tile's grid coordinates.
+bool summary_serves(const PixelGrid& grid, Scheme scheme);
+
+// Source pixels per lattice step at zoom z (the smaller of the two axes).
+double pixels_per_step(const PixelGrid& grid, Scheme scheme, int z, int size);
+
+// The summary level a zoom reads: its blocks no wider than a lattice step, so each lattice cell
+// is judged against blocks of its own size or smaller. -1 when the step is narrower than the
+// finest level's blocks (such a zoom reads pixels).
+int summary_level(const DemSummary& summary, const PixelGrid& grid, Scheme scheme, int z, int size);
+
+// The lattice points (column0 + i, row0 + j) of (scheme, z, size), as DemSource::sample gives
+// them, each the plane of the block it lies in: heights in the source's datum (EGM96 sources: the summary's ellipsoidal height less the
+// undulation, which the tile raster adds back), valid where the point lies in a block with data.
+LatticeBlock summary_lattice(const DemSummary& summary,
+                             const PixelGrid& grid,
+                             VerticalDatum datum,
+                             Scheme scheme,
+                             int z,
+                             int size,
+                             int level,
+                             std::int64_t column0,
+                             std::int64_t row0,
+                             int width,
+                             int height);
+
+// The blocks of `level` holding valid pixel centres inside the tile of `raster` (a lattice
+// raster), each clipped to the tile, in raster's grid coordinates.
+std::vector<CheckCell> summary_cells(const DemSummary& summary,
+                                     const PixelGrid& grid,
+                                     const TileRaster& raster,
+                                     int level);
+
+} // namespace tb::tiler
