@@ -277,7 +277,8 @@ void parse_layer(Checker& check,
                       "store",
                       "dem_tile_size",
                       "dem_heights",
-                      "nodata"});
+                      "nodata",
+                      "effort"});
     tiler::LayerOptions& o = out.options;
 
     if (!value.contains("name")) {
@@ -361,6 +362,11 @@ void parse_layer(Checker& check,
             if (auto v = check.eps(levels[i], at + "/eps_levels/" + std::to_string(i))) {
                 o.eps_levels.push_back(*v);
             }
+        }
+    }
+    if (value.contains("effort")) {
+        if (auto s = check.one_of(value["effort"], at + "/effort", {"fast", "balanced", "best"})) {
+            o.effort = core::parse_effort(*s);
         }
     }
     if (value.contains("datum")) {

@@ -129,6 +129,9 @@ int run(const Args& args) {
     if (args.has("nodata")) {
         o.layer.nodata = args.get_double("nodata", 0);
     }
+    if (auto v = args.get("effort")) {
+        o.layer.effort = core::parse_effort(*v);
+    }
     if (auto v = args.get("bbox")) {
         o.bbox = parse_bbox(*v);
     }
@@ -221,6 +224,7 @@ const Command& build_command() {
              {"dem-size", "P", "DEM tiles are P x P pixels, 256 or 512 (default 512)"},
              {"dem-heights", "H", "DEM tile heights: sea_level (default) or ellipsoid"},
              {"nodata", "V", "raw sample value to treat as nodata, replacing the file's own"},
+             {"effort", "LEVEL", "mesher effort: fast, balanced (default) or best; the same bound at each, best the fewest triangles"},
              {"threads", "N", "worker threads (default: one per usable core)"},
              {"resume", "", "continue a build: same parameters, tiles already there are kept"},
              {"force", "", "delete the layer's existing tiles and documents first"},

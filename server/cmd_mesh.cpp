@@ -56,6 +56,7 @@ int run(const Args& args) {
     core::TriangulateOptions options;
     options.eps = eps;
     options.lock_border = !args.has("no-lock-border");
+    options.effort = core::parse_effort(args.get("effort").value_or("balanced"));
     const core::Mesh mesh = core::triangulate(grid, options);
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -91,6 +92,7 @@ const Command& mesh_command() {
               "max_error, seconds"},
              {"no-lock-border", "", "let the border be simplified like the interior"},
              {"nodata", "V", "raw sample value to treat as nodata, replacing the file's own"},
+             {"effort", "LEVEL", "mesher effort: fast, balanced (default) or best; the same bound at each, best the fewest triangles"},
          },
          "Band 1 is meshed in grid coordinates (x = column, y = row, row 0 first); nodata\n"
          "samples constrain nothing and are filled from their surroundings. No georeferencing\n"

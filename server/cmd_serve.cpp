@@ -185,6 +185,12 @@ int run(const Args& args) {
             layer.options.nodata = nodata;
         }
     }
+    if (auto v = args.get("effort")) {
+        const core::Effort effort = core::parse_effort(*v);
+        for (auto& layer : cfg.layers) {
+            layer.options.effort = effort;
+        }
+    }
     log::Level level = log::Level::Info;
     if (log::parse_level(cfg.server.log_level, level)) {
         log::set_level(level);
@@ -263,6 +269,7 @@ const Command& serve_command() {
           {"threads", "N", "tile generation threads (default: one per usable core)"},
           {"web", "DIR", "the viewer's directory (default: web/ of this checkout; 'none': off)"},
           {"nodata", "V", "raw sample value every layer treats as nodata (the config's nodata)"},
+          {"effort", "LEVEL", "mesher effort of every layer (the config's effort): fast, balanced (default) or best"},
           {"store",
            "PATH",
            "keep generated tiles in this store for every layer: a directory, or a file "

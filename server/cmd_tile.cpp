@@ -47,6 +47,9 @@ int run(const Args& args) {
     }
     options.tile_size = static_cast<int>(size);
     options.datum = tiler::parse_datum(args.get("datum").value_or("auto"));
+    if (auto v = args.get("effort")) {
+        options.effort = core::parse_effort(*v);
+    }
     if (args.has("nodata")) {
         options.nodata = args.get_double("nodata", 0);
     }
@@ -115,6 +118,7 @@ const Command& tile_command() {
              {"size", "N", "tile raster of (N+1) x (N+1) samples (default 256)"},
              {"datum", "NAME", "source heights: auto (default), egm96 or ellipsoid"},
              {"nodata", "V", "raw sample value to treat as nodata, replacing the file's own"},
+             {"effort", "LEVEL", "mesher effort: fast, balanced (default) or best; the same bound at each, best the fewest triangles"},
          },
          "Outputs: .glb (glTF + Draco, ECEF), .drc (Draco, local ENU), .obj (the mesh in the\n"
          "grid coordinates of the samples it was meshed on: v column row height, heights above\n"

@@ -49,6 +49,7 @@ Manifest tile_settings(const Layer& layer) {
     m.emplace_back("sources", sources + "]");
     m.emplace_back("scheme", json_string(to_string(o.scheme)));
     m.emplace_back("tile_size", std::to_string(o.tile_size));
+    m.emplace_back("effort", json_string(core::to_string(o.effort)));
     m.emplace_back("datum", json_string(to_string(layer.source_datum())));
     m.emplace_back("min_zoom", std::to_string(layer.min_zoom()));
     m.emplace_back("max_zoom", std::to_string(layer.max_zoom()));
