@@ -386,8 +386,10 @@ void parse_layer(Checker& check,
         }
         for (std::size_t i = 0; i < formats.size(); ++i) {
             const std::string pi = at + "/formats/" + std::to_string(i);
-            if (auto s = check.one_of(
-                    formats[i], pi, {"glb", "drc", "terrarium", "mapbox", "terrain", "terrain3d"})) {
+            if (auto s =
+                    check.one_of(formats[i],
+                                 pi,
+                                 {"glb", "drc", "terrarium", "mapbox", "terrain", "terrain3d"})) {
                 const tiler::Format f = *tiler::parse_format(*s);
                 bool seen = false;
                 for (auto g : out.formats) {

@@ -1,10 +1,11 @@
 // terrabound build: pre-generate a layer's tile pyramid into a directory or an SQLite file.
-// The work is tiler/build/build.cpp; this file parses options, handles SIGINT/SIGTERM and reports.
+// The work is tiler/pyramid/build.cpp; this file parses options, handles SIGINT/SIGTERM and
+// reports.
 #include "core/error.hpp"
 #include "server/commands.hpp"
-#include "tiler/build/build.hpp"
 #include "tiler/dem_tiles.hpp"
 #include "tiler/log.hpp"
+#include "tiler/pyramid/build.hpp"
 
 #include <atomic>
 #include <csignal>
@@ -224,7 +225,10 @@ const Command& build_command() {
              {"dem-size", "P", "DEM tiles are P x P pixels, 256 or 512 (default 512)"},
              {"dem-heights", "H", "DEM tile heights: sea_level (default) or ellipsoid"},
              {"nodata", "V", "raw sample value to treat as nodata, replacing the file's own"},
-             {"effort", "LEVEL", "mesher effort: fast, balanced (default) or best; the same bound at each, best the fewest triangles"},
+             {"effort",
+              "LEVEL",
+              "mesher effort: fast, balanced (default) or best; the same bound at each, best the "
+              "fewest triangles"},
              {"threads", "N", "worker threads (default: one per usable core)"},
              {"resume", "", "continue a build: same parameters, tiles already there are kept"},
              {"force", "", "delete the layer's existing tiles and documents first"},

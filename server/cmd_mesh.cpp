@@ -92,7 +92,10 @@ const Command& mesh_command() {
               "max_error, seconds"},
              {"no-lock-border", "", "let the border be simplified like the interior"},
              {"nodata", "V", "raw sample value to treat as nodata, replacing the file's own"},
-             {"effort", "LEVEL", "mesher effort: fast, balanced (default) or best; the same bound at each, best the fewest triangles"},
+             {"effort",
+              "LEVEL",
+              "mesher effort: fast, balanced (default) or best; the same bound at each, best the "
+              "fewest triangles"},
          },
          "Band 1 is meshed in grid coordinates (x = column, y = row, row 0 first); nodata\n"
          "samples constrain nothing and are filled from their surroundings. No georeferencing\n"

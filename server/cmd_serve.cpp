@@ -7,7 +7,7 @@
 #include "server/tile_service.hpp"
 #include "tiler/cpus.hpp"
 #include "tiler/log.hpp"
-#include "tiler/stores/manifest.hpp"
+#include "tiler/pyramid/tile_settings.hpp"
 #include "tiler/stores/store.hpp"
 
 #include <pthread.h>
@@ -269,7 +269,9 @@ const Command& serve_command() {
           {"threads", "N", "tile generation threads (default: one per usable core)"},
           {"web", "DIR", "the viewer's directory (default: web/ of this checkout; 'none': off)"},
           {"nodata", "V", "raw sample value every layer treats as nodata (the config's nodata)"},
-          {"effort", "LEVEL", "mesher effort of every layer (the config's effort): fast, balanced (default) or best"},
+          {"effort",
+           "LEVEL",
+           "mesher effort of every layer (the config's effort): fast, balanced (default) or best"},
           {"store",
            "PATH",
            "keep generated tiles in this store for every layer: a directory, or a file "

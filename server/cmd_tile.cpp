@@ -118,7 +118,10 @@ const Command& tile_command() {
              {"size", "N", "tile raster of (N+1) x (N+1) samples (default 256)"},
              {"datum", "NAME", "source heights: auto (default), egm96 or ellipsoid"},
              {"nodata", "V", "raw sample value to treat as nodata, replacing the file's own"},
-             {"effort", "LEVEL", "mesher effort: fast, balanced (default) or best; the same bound at each, best the fewest triangles"},
+             {"effort",
+              "LEVEL",
+              "mesher effort: fast, balanced (default) or best; the same bound at each, best the "
+              "fewest triangles"},
          },
          "Outputs: .glb (glTF + Draco, ECEF), .drc (Draco, local ENU), .obj (the mesh in the\n"
          "grid coordinates of the samples it was meshed on: v column row height, heights above\n"

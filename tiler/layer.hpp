@@ -111,8 +111,8 @@ public:
     // The eps globe terrain (quantized-mesh, 3D Tiles terrain) is meshed at: the ladder, or a
     // share of CesiumJS's own level error where that is larger.
     virtual double terrain_eps_for_zoom(int z) const = 0;
-    virtual LonLatBox data_bounds() const = 0;    // the sources' extent in lon/lat
-    virtual TileRange tiles_at(int z) const = 0;  // tiles of zoom z that may hold data
+    virtual LonLatBox data_bounds() const = 0;   // the sources' extent in lon/lat
+    virtual TileRange tiles_at(int z) const = 0; // tiles of zoom z that may hold data
     virtual bool may_have_tile(const TileId& id) const = 0;
 
     // The layer's tileset documents by relative path: "tileset.json" (3D Tiles 1.1; content URIs

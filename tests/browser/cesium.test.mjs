@@ -196,16 +196,16 @@ test('the viewer page at / opens on lit globe terrain at the finest zoom, with a
 
     // The wireframe checkbox draws the triangle mesh, and unchecking it restores the view (as it
     // was just before: the provider swapped back above may have settled on other tiles).
-    const before = await page.screenshot();
+    const unwired = await page.screenshot();
     await page.check('#wireframe');
     await page.waitForTimeout(500);
     const wire = await saveScreenshot(page, 'viewer-wireframe.png');
-    const wireShare = await differingShare(page, wire.png, { reference: before, tolerance: 12 });
+    const wireShare = await differingShare(page, wire.png, { reference: unwired, tolerance: 12 });
     t.diagnostic(`${since()}: wireframe changes ${(wireShare * 100).toFixed(1)} % of the globe view (${wire.file})`);
     assert.ok(wireShare > 0.05, `the wireframe changes only ${(wireShare * 100).toFixed(1)} % of the screen`);
     await page.uncheck('#wireframe');
     await page.waitForTimeout(500);
-    const unwire = await differingShare(page, await page.screenshot(), { reference: before, tolerance: 12 });
+    const unwire = await differingShare(page, await page.screenshot(), { reference: unwired, tolerance: 12 });
     assert.ok(unwire < 0.02, `unchecking the wireframe leaves ${(unwire * 100).toFixed(1)} % changed`);
 
     // The 3D Tiles model, through the view picker, from the same camera.

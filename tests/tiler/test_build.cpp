@@ -2,9 +2,9 @@
 // real DEM, into both stores; kill and resume, shards, thread counts, bad input.
 #include "core/error.hpp"
 #include "terrain3d_reader.hpp"
-#include "tiler/build/build.hpp"
 #include "tiler/dem_tiles.hpp"
 #include "tiler/formats/draco_decode.hpp"
+#include "tiler/pyramid/build.hpp"
 #include "tiler/stores/store.hpp"
 
 #include <doctest/doctest.h>

@@ -2,8 +2,8 @@
 // (tiler/stores/manifest.hpp). Real layers on a generated DEM, both stores.
 #include "core/error.hpp"
 #include "tests/tiler/test_raster_util.hpp"
-#include "tiler/build/build.hpp"
-#include "tiler/stores/manifest.hpp"
+#include "tiler/pyramid/build.hpp"
+#include "tiler/pyramid/tile_settings.hpp"
 
 #include <doctest/doctest.h>
 

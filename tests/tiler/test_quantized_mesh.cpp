@@ -346,8 +346,8 @@ TEST_CASE("every pixel of a mountain DEM under its finest and coarsest terrain t
             }
             MESSAGE(name << " zoom " << z << ": " << judged << " pixels, worst error " << worst
                          << " of the published error, "
-                         << std::string(tiler::to_string(layer.zoom_source(z)))
-                         << " zoom eps " << layer.terrain_eps_for_zoom(z) << " m");
+                         << std::string(tiler::to_string(layer.zoom_source(z))) << " zoom eps "
+                         << layer.terrain_eps_for_zoom(z) << " m");
             CHECK(judged > 0);
         }
     });

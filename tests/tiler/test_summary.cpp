@@ -40,7 +40,8 @@ Surface random_surface(int n, std::mt19937& rng) {
                 s.triangles.insert(s.triangles.end(), {at(i, j), at(i + 1, j + 1), at(i, j + 1)});
             } else {
                 s.triangles.insert(s.triangles.end(), {at(i, j), at(i + 1, j), at(i, j + 1)});
-                s.triangles.insert(s.triangles.end(), {at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)});
+                s.triangles.insert(s.triangles.end(),
+                                   {at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)});
             }
         }
     }
@@ -83,7 +84,8 @@ TEST_CASE("the cell check bounds every pixel of every cell under a drawn surface
             for (int bx = 0; bx * 5 < px; ++bx) {
                 CheckCell c;
                 c.x0 = bx * 5 * step, c.y0 = by * 5 * step;
-                c.x1 = std::min(bx * 5 + 4, px - 1) * step, c.y1 = std::min(by * 5 + 4, px - 1) * step;
+                c.x1 = std::min(bx * 5 + 4, px - 1) * step,
+                c.y1 = std::min(by * 5 + 4, px - 1) * step;
                 c.height = slope(rng), c.per_column = slope(rng), c.per_row = slope(rng);
                 std::vector<std::array<double, 3>> pixels;
                 for (int j = by * 5; j <= std::min(by * 5 + 4, px - 1); ++j) {
@@ -143,8 +145,8 @@ TEST_CASE("every valid pixel of a DEM lies within its summary block's plane and 
     std::uniform_real_distribution<double> noise(0, 9);
     for (int j = 0; j < f.height; ++j) {
         for (int i = 0; i < f.width; ++i) {
-            double h = 800 + 3 * i - 2 * j + 300 * std::sin(i / 17.0) * std::cos(j / 11.0) +
-                       noise(rng);
+            double h =
+                800 + 3 * i - 2 * j + 300 * std::sin(i / 17.0) * std::cos(j / 11.0) + noise(rng);
             if (std::hypot(i - 120, j - 90) < 30 || (i > 250 && j < 20)) {
                 h = -32768;
             }
@@ -181,7 +183,8 @@ TEST_CASE("every valid pixel of a DEM lies within its summary block's plane and 
                     REQUIRE(b != nullptr);
                     REQUIRE_FALSE(b->empty());
                     const double r =
-                        h - DemSummary::plane(*b, level, i >> level, j >> level, double(i), double(j));
+                        h -
+                        DemSummary::plane(*b, level, i >> level, j >> level, double(i), double(j));
                     CHECK(r >= b->low);
                     CHECK(r <= b->high);
                     widest = std::max(widest, static_cast<double>(b->high) - b->low);

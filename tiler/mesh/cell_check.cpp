@@ -134,8 +134,12 @@ CellsVerdict cells_error(const GridSurface& surface, const std::vector<CheckCell
             }
             Polygon box;
             box.n = 4;
-            box.p = {Point{cell.x0, cell.y0}, {cell.x1, cell.y0}, {cell.x1, cell.y1}, {cell.x0, cell.y1}};
-            Polygon part = clip(clip(clip(box, pa, pb, sign, slack), pb, pc, sign, slack), pc, pa, sign, slack);
+            box.p = {Point{cell.x0, cell.y0},
+                     {cell.x1, cell.y0},
+                     {cell.x1, cell.y1},
+                     {cell.x0, cell.y1}};
+            Polygon part = clip(
+                clip(clip(box, pa, pb, sign, slack), pb, pc, sign, slack), pc, pa, sign, slack);
             if (part.n == 0) {
                 return;
             }
@@ -143,8 +147,8 @@ CellsVerdict cells_error(const GridSurface& surface, const std::vector<CheckCell
             for (int q = 0; q < part.n; ++q) {
                 const Point& p = part.p[static_cast<std::size_t>(q)];
                 const double drawn = a[2] + gx * (p[0] - a[0]) + gy * (p[1] - a[1]);
-                verdict.error =
-                    std::max(verdict.error, std::abs(drawn - cell.reference(p[0], p[1])) + cell.half);
+                verdict.error = std::max(verdict.error,
+                                         std::abs(drawn - cell.reference(p[0], p[1])) + cell.half);
             }
         });
     }

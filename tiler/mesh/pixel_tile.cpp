@@ -406,17 +406,17 @@ TileMesh mesh_pixel_tile(const PixelTile& t,
     std::vector<int> inner[4]; // positions along each side of the block, increasing
     if (w >= 2 && h >= 2) {
         // Small pages: many tiles are meshed at once (core::TriangulateOptions::huge_pages).
-        const core::Mesh mesh = core::triangulate_strips(
-            grid,
-            core::TriangulateOptions{.eps = budget.mesh_eps,
-                                     .lock_border = true,
-                                     .max_edge = core_edge,
-                                     .check_error = check_error,
-                                     .huge_pages = false,
-                                     .effort = effort},
-            2,
-            threads,
-            run_on_helper);
+        const core::Mesh mesh =
+            core::triangulate_strips(grid,
+                                     core::TriangulateOptions{.eps = budget.mesh_eps,
+                                                              .lock_border = true,
+                                                              .max_edge = core_edge,
+                                                              .check_error = check_error,
+                                                              .huge_pages = false,
+                                                              .effort = effort},
+                                     2,
+                                     threads,
+                                     run_on_helper);
         // The block's vertices, and room for those the border lines add.
         index.reserve(mesh.points.size() + static_cast<std::size_t>(w + h) / 2);
         std::vector<core::Index> id(mesh.points.size());

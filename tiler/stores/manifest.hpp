@@ -1,14 +1,13 @@
 #pragma once
-// What made a store's tiles. Beside each layer's tiles a store keeps a manifest document: the
-// settings that decide the tiles' bytes (and so the error bound each tile was made to), one
-// "key": JSON value per line in a fixed order, with no timestamps, so that processes starting
-// together write identical bytes.
+// What made a store's tiles (keys and JSON values; the store knows no layer). Beside each layer's
+// tiles a store keeps a manifest document: the settings that decide the tiles' bytes (and so the
+// error bound each tile was made to), one "key": JSON value per line in a fixed order, with no
+// timestamps, so that processes starting together write identical bytes.
 //   build-manifest.json  written by `terrabound build` before its first tile (build.hpp);
 //   serve-manifest.json  written by `terrabound serve` when it starts with a store.
 // Before a store's tiles are handed out or added to, the manifest is compared with the layer's
 // settings now: a tile made for another eps, DEM or Terrabound version would publish a bound
 // that is not this layer's.
-#include "tiler/layer.hpp"
 #include "tiler/stores/store.hpp"
 
 #include <optional>
@@ -23,13 +22,6 @@ inline constexpr const char* kBuildManifest = "build-manifest.json";
 inline constexpr const char* kServeManifest = "serve-manifest.json";
 
 using Manifest = std::vector<std::pair<std::string, std::string>>; // key, JSON value
-
-// The entries that decide the bytes of every tile the layer makes, in this order: version (the
-// revision: "0.1.0+" and a hash of core/ and tiler/'s sources, see CMakeLists.txt), layer, sources
-// (absolute path, size and mtime of each local file), scheme, tile_size, datum, min_zoom, max_zoom,
-// eps (the ladder, one per zoom), eps_levels, nodata, and the DEM pyramid's dem_tile_size,
-// dem_heights, dem_min_zoom, dem_max_zoom.
-Manifest tile_settings(const Layer& layer);
 
 std::string manifest_text(const Manifest& m);
 // Reads what manifest_text wrote; lines that are not "key": value are skipped.
@@ -53,8 +45,9 @@ struct StoreUse {
     bool eps_levels = true;
 };
 
-// Makes `store` ready to serve `layer`'s tiles, before any is read or written:
-//   - a build manifest must match the layer's tile settings (its bbox, formats, shards and
+// Makes `store` ready to serve the tiles of layer `name`, whose tile settings are `now` (see
+// tiler/pyramid/tile_settings.hpp), before any is read or written:
+//   - a build manifest must match those settings (its bbox, formats, shards and
 //     eps_levels aside), else InputError naming the setting, both values and the ways out;
 //     when only the Terrabound version differs, the tiles are served with a warning line;
 //   - a serve manifest that does not match means the tiles are an earlier server's cache made
@@ -64,6 +57,6 @@ struct StoreUse {
 //     deleted on a guess);
 //   - an empty layer gets a serve manifest.
 // IoError when the store cannot be read or written.
-StoreUse prepare_store_for_serving(TileStore& store, const Layer& layer);
+StoreUse prepare_store_for_serving(TileStore& store, const std::string& name, const Manifest& now);
 
 } // namespace tb::tiler

@@ -172,7 +172,8 @@ SummaryBlock DemSummary::fit_children(int level, std::int64_t bx, std::int64_t b
     SummaryBlock out{static_cast<float>(a), static_cast<float>(b), static_cast<float>(c), 0, 0};
     double lo = INFINITY, hi = -INFINITY;
     for (int q = 0; q < count; ++q) {
-        const SummaryBlock& kid = *block(child, kids[static_cast<std::size_t>(q)].first,
+        const SummaryBlock& kid = *block(child,
+                                         kids[static_cast<std::size_t>(q)].first,
                                          kids[static_cast<std::size_t>(q)].second);
         for (int r = 0; r < 4; ++r) {
             const Corner& p = corners[static_cast<std::size_t>(4 * q + r)];
@@ -218,7 +219,11 @@ DemSummary DemSummary::build(const DemSource& source, const PixelGrid& grid, Ver
         }
         for (std::int64_t by = row0 >> kFinestLevel; by < (row0 + rows + 7) >> kFinestLevel; ++by) {
             for (std::int64_t bx = 0; bx < across; ++bx) {
-                finest.push_back(fit_pixels(px, grid.width, row0, bx, by,
+                finest.push_back(fit_pixels(px,
+                                            grid.width,
+                                            row0,
+                                            bx,
+                                            by,
                                             s.last_column(kFinestLevel, bx),
                                             s.last_row(kFinestLevel, by)));
             }
@@ -230,7 +235,8 @@ DemSummary DemSummary::build(const DemSource& source, const PixelGrid& grid, Ver
         }
     }
     for (int level = kFinestLevel + 1;
-         s.blocks_across(level - 1) > 1 || s.blocks_down(level - 1) > 1; ++level) {
+         s.blocks_across(level - 1) > 1 || s.blocks_down(level - 1) > 1;
+         ++level) {
         std::vector<SummaryBlock> blocks;
         blocks.reserve(static_cast<std::size_t>(s.blocks_across(level) * s.blocks_down(level)));
         for (std::int64_t by = 0; by < s.blocks_down(level); ++by) {
@@ -241,8 +247,8 @@ DemSummary DemSummary::build(const DemSource& source, const PixelGrid& grid, Ver
         s.levels_.push_back(std::move(blocks));
     }
     log::info(path + ": summary ready, levels " + std::to_string(s.finest_level()) + ".." +
-              std::to_string(s.coarsest_level()) + ", " +
-              std::to_string(s.bytes() / 1024) + " KiB");
+              std::to_string(s.coarsest_level()) + ", " + std::to_string(s.bytes() / 1024) +
+              " KiB");
     return s;
 }
 

@@ -59,8 +59,8 @@ public:
     std::int64_t last_row(int level, std::int64_t by) const;
 
     // The plane of a block at pixel coordinates (i, j), as the ranges were computed.
-    static double plane(const SummaryBlock& b, int level, std::int64_t bx, std::int64_t by,
-                        double i, double j) {
+    static double
+    plane(const SummaryBlock& b, int level, std::int64_t bx, std::int64_t by, double i, double j) {
         return static_cast<double>(b.height) +
                static_cast<double>(b.per_column) * (i - centre(level, bx)) +
                static_cast<double>(b.per_row) * (j - centre(level, by));

@@ -30,7 +30,8 @@ double pixels_per_step(const PixelGrid& grid, Scheme scheme, int z, int size) {
     return step / std::max(grid.dx, grid.dy);
 }
 
-int summary_level(const DemSummary& summary, const PixelGrid& grid, Scheme scheme, int z, int size) {
+int summary_level(
+    const DemSummary& summary, const PixelGrid& grid, Scheme scheme, int z, int size) {
     const double pps = pixels_per_step(grid, scheme, z, size);
     const int level = static_cast<int>(std::floor(std::log2(pps) + 1e-9));
     if (level < summary.finest_level()) {
@@ -95,14 +96,18 @@ std::vector<CheckCell> summary_cells(const DemSummary& summary,
     // The tile's box in pixel coordinates, then the pixel centres inside it (closed).
     double i_west = 0, j_north = 0, i_east = 0, j_south = 0;
     to_pixel(grid, raster.scheme, f.x0, f.y0, i_west, j_north);
-    to_pixel(grid, raster.scheme, f.x0 + f.dx * (raster.grid.width - 1),
-             f.y0 - f.dy * (raster.grid.height - 1), i_east, j_south);
+    to_pixel(grid,
+             raster.scheme,
+             f.x0 + f.dx * (raster.grid.width - 1),
+             f.y0 - f.dy * (raster.grid.height - 1),
+             i_east,
+             j_south);
     const auto i0 = std::max<std::int64_t>(static_cast<std::int64_t>(std::ceil(i_west)), 0);
     const auto j0 = std::max<std::int64_t>(static_cast<std::int64_t>(std::ceil(j_north)), 0);
-    const auto i1 = std::min<std::int64_t>(static_cast<std::int64_t>(std::floor(i_east)),
-                                           grid.width - 1);
-    const auto j1 = std::min<std::int64_t>(static_cast<std::int64_t>(std::floor(j_south)),
-                                           grid.height - 1);
+    const auto i1 =
+        std::min<std::int64_t>(static_cast<std::int64_t>(std::floor(i_east)), grid.width - 1);
+    const auto j1 =
+        std::min<std::int64_t>(static_cast<std::int64_t>(std::floor(j_south)), grid.height - 1);
     std::vector<CheckCell> cells;
     if (i0 > i1 || j0 > j1) {
         return cells;
@@ -116,8 +121,10 @@ std::vector<CheckCell> summary_cells(const DemSummary& summary,
             if (b == nullptr || b->empty()) {
                 continue;
             }
-            const auto ia = std::max(bx << level, i0), ib = std::min(summary.last_column(level, bx), i1);
-            const auto ja = std::max(by << level, j0), jb = std::min(summary.last_row(level, by), j1);
+            const auto ia = std::max(bx << level, i0),
+                       ib = std::min(summary.last_column(level, bx), i1);
+            const auto ja = std::max(by << level, j0),
+                       jb = std::min(summary.last_row(level, by), j1);
             CheckCell c;
             c.x0 = gx0 + static_cast<double>(ia) * sx, c.x1 = gx0 + static_cast<double>(ib) * sx;
             c.y0 = gy0 + static_cast<double>(ja) * sy, c.y1 = gy0 + static_cast<double>(jb) * sy;

@@ -27,8 +27,9 @@ double pixels_per_step(const PixelGrid& grid, Scheme scheme, int z, int size);
 int summary_level(const DemSummary& summary, const PixelGrid& grid, Scheme scheme, int z, int size);
 
 // The lattice points (column0 + i, row0 + j) of (scheme, z, size), as DemSource::sample gives
-// them, each the plane of the block it lies in: heights in the source's datum (EGM96 sources: the summary's ellipsoidal height less the
-// undulation, which the tile raster adds back), valid where the point lies in a block with data.
+// them, each the plane of the block it lies in: heights in the source's datum (EGM96 sources: the
+// summary's ellipsoidal height less the undulation, which the tile raster adds back), valid where
+// the point lies in a block with data.
 LatticeBlock summary_lattice(const DemSummary& summary,
                              const PixelGrid& grid,
                              VerticalDatum datum,

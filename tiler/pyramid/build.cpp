@@ -2,7 +2,7 @@
 // kill). Threads: N workers take tile indices from one atomic counter over the fixed order,
 // make the tile's formats and push the bytes into a bounded queue; the calling thread is the
 // only writer: it drains the queue into the store in batches and draws the progress.
-#include "tiler/build/build.hpp"
+#include "tiler/pyramid/build.hpp"
 
 #include "tiler/formats/quantized_mesh.hpp"
 #include "tiler/formats/terrain_tiles.hpp"
@@ -12,7 +12,7 @@
 #include "tiler/dem_tiles.hpp"
 #include "tiler/json_number.hpp"
 #include "tiler/log.hpp"
-#include "tiler/stores/manifest.hpp"
+#include "tiler/pyramid/tile_settings.hpp"
 #include "tiler/stores/store.hpp"
 
 #include <algorithm>
@@ -989,11 +989,11 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
     summary.over_eps = static_cast<std::int64_t>(layer->tiles_over_eps());
     if (summary.over_eps > 0) {
         log::info("build: " + std::to_string(summary.over_eps) +
-                  " tile(s) measured above their zoom's eps at the source's pixels (zooms meshed "
-                  "on a lattice coarser than the pixels, sources in another CRS than the "
-                  "scheme's, or globe terrain whose quantization exceeds it; counted once per "
-                  "format); each publishes its measured bound (tileset entry, quantized-mesh "
-                  "metadata, glb asset.extras)");
+                  " tile(s) measured above their zoom's eps at the source's pixels (zooms "
+                  "meshed on a lattice coarser than the pixels, sources in another CRS than "
+                  "the scheme's, or globe terrain whose quantization exceeds it; counted once "
+                  "per format); each publishes its measured bound (its tileset or subtree "
+                  "entry, the .drc's eps_m, the quantized-mesh metadata)");
     }
     summary.seconds = std::chrono::duration<double>(Clock::now() - start).count();
     return summary;
