@@ -49,7 +49,7 @@ constexpr double kMinEps = 0.001;
 // CesiumJS's geometric error of a geodetic terrain level at zoom 0, metres: the equator's
 // length / 4 over a 65-sample tile, two tiles across (getLevelMaximumGeometricError).
 constexpr double kCesiumLevelError = 6378137.0 * 2 * 3.14159265358979323846 * 0.25 / (65 * 2);
-// The share of it globe terrain is meshed at, at least (see terrain_eps).
+// The share of it globe terrain is meshed at, at least (see terrain_eps_for_zoom).
 constexpr double kTerrainLevelShare = 0.25;
 // 3D Tiles terrain tiles wider than this (zoom 6 and coarser) carry float32 positions: the
 // 16-bit box is level at the tile's centre, and far from it a step of the box moves a vertex's
@@ -202,8 +202,9 @@ public:
         spec.max_height = std::max(max_height_, kGeoidHighest);
         spec.root_error = relief() * std::exp2(std::max(terrain_min_zoom_ - 1, 0));
         for (int z = terrain_min_zoom_; z <= max_zoom_; ++z) {
-            spec.root_error = std::max(
-                spec.root_error, terrain_budget_at(z, terrain_eps(z)).drawn_bound * std::exp2(z));
+            spec.root_error =
+                std::max(spec.root_error,
+                         terrain_budget_at(z, terrain_eps_for_zoom(z)).drawn_bound * std::exp2(z));
         }
         const double lo = spec.min_height, hi = spec.max_height;
         spec.bounds = [lo, hi](const TileId& id) {
@@ -492,10 +493,17 @@ public:
             const double pps = source_->pixels_per_sample(scheme, z, size);
             if (pps >= std::exp2(kFinestLevel)) {
                 const DemSummary& sum = summary();
-                const int level =
-                    std::min(static_cast<int>(std::floor(std::log2(pps))), sum.coarsest_level());
-                return summary_lattice(
-                    sum, *pixels_, datum_, scheme, z, size, level, column0, row0, width, height);
+                return summary_lattice(sum,
+                                       *pixels_,
+                                       datum_,
+                                       scheme,
+                                       z,
+                                       size,
+                                       summary_level(sum, pps),
+                                       column0,
+                                       row0,
+                                       width,
+                                       height);
             }
         }
         return source_->sample(scheme, z, size, column0, row0, width, height);
@@ -573,7 +581,7 @@ private:
 
     TerrainSpec terrain_spec() const {
         return TerrainSpec{options_.name, terrain_min_zoom_, max_zoom_, footprint_, [this](int z) {
-                               return terrain_eps(z);
+                               return terrain_eps_for_zoom(z);
                            }};
     }
 
@@ -632,7 +640,7 @@ private:
         // tile) across the slope: it is measured at every sample, and where it takes the tile
         // past its bound the worst samples become vertices (quantize_within). The border lines
         // keep the vertices the zoom's eps gave them, so neighbouring tiles still share them.
-        const double eps = terrain_eps(id.z);
+        const double eps = terrain_eps_for_zoom(id.z);
         const double target = terrain_budget_at(id.z, eps).drawn_bound;
         TerrainDraft draft;
         MeshedTile& t = draft.meshed;
@@ -674,7 +682,7 @@ private:
                        : encode_terrain_glb(draft.tile);
         }
         const MeshedTile& t = draft.meshed;
-        const double target = terrain_budget_at(id.z, terrain_eps(id.z)).drawn_bound;
+        const double target = terrain_budget_at(id.z, terrain_eps_for_zoom(id.z)).drawn_bound;
         TerrainTile& tile = draft.tile;
         double drawn = draft.quantized; // what the encoded format draws, at every sample
         if (format == Format::Terrain3d) {
@@ -1041,8 +1049,7 @@ private:
     // (kCesiumLevelError / 2^z), so a tile drawn closer than that costs bytes no view shows; and
     // at coarse zooms straight triangles must follow the Earth's curve (the chord sag), which
     // at the ladder's eps takes a full lattice of triangles (131,072 at zoom 0).
-    double terrain_eps_for_zoom(int z) const override { return terrain_eps(z); }
-    double terrain_eps(int z) const {
+    double terrain_eps_for_zoom(int z) const override {
         return std::max(eps_for_zoom(z), kCesiumLevelError / std::exp2(z) * kTerrainLevelShare);
     }
 

@@ -32,8 +32,11 @@ double pixels_per_step(const PixelGrid& grid, Scheme scheme, int z, int size) {
 
 int summary_level(
     const DemSummary& summary, const PixelGrid& grid, Scheme scheme, int z, int size) {
-    const double pps = pixels_per_step(grid, scheme, z, size);
-    const int level = static_cast<int>(std::floor(std::log2(pps) + 1e-9));
+    return summary_level(summary, pixels_per_step(grid, scheme, z, size));
+}
+
+int summary_level(const DemSummary& summary, double pixels_per_step) {
+    const int level = static_cast<int>(std::floor(std::log2(pixels_per_step) + 1e-9));
     if (level < summary.finest_level()) {
         return -1;
     }

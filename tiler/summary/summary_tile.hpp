@@ -25,6 +25,8 @@ double pixels_per_step(const PixelGrid& grid, Scheme scheme, int z, int size);
 // is judged against blocks of its own size or smaller. -1 when the step is narrower than the
 // finest level's blocks (such a zoom reads pixels).
 int summary_level(const DemSummary& summary, const PixelGrid& grid, Scheme scheme, int z, int size);
+// The same for a given number of source pixels per lattice step (any lattice, e.g. DEM tiles').
+int summary_level(const DemSummary& summary, double pixels_per_step);
 
 // The lattice points (column0 + i, row0 + j) of (scheme, z, size), as DemSource::sample gives
 // them, each the plane of the block it lies in: heights in the source's datum (EGM96 sources: the
