@@ -11,9 +11,15 @@
 // triangles than the spatial order, and merged 4-16% slower, since each visit jumped across
 // the mesh where the spatial order finds the neighbourhood still in cache. Either way each
 // removal is decided by the same exact test.
+//
+// On a big grid a pass works the halves left and right of the middle column apart, on two
+// threads (merge_pass): a removal changes only the triangles around the removed vertex, so
+// two vertices whose neighbourhoods lie on opposite sides never see each other's work, and
+// the mesh does not depend on which half runs first.
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <future>
 
 #include "core/error.hpp"
 #include "core/memory.hpp"
@@ -43,11 +49,12 @@ struct Candidate {
 
 } // namespace
 
-bool Refiner::try_remove(Index v, std::vector<Index>& ring, const MergeLimits& limits) {
+bool Refiner::try_remove(Index v, MergeWorker& w, const MergeLimits& limits) {
+    std::vector<Index>& ring = w.ring;
     tin_.ring(v, ring);
     const bool border = tin_.halfedges[ring.front()] == kNone;
-    auto& poly = scratch_.poly;
-    auto& pts = scratch_.pts;
+    auto& poly = w.poly;
+    auto& pts = w.pts;
     poly.clear();
     pts.clear();
     std::int64_t before = 0;
@@ -64,8 +71,8 @@ bool Refiner::try_remove(Index v, std::vector<Index>& ring, const MergeLimits& l
     if (poly.size() > limits.max_hole || poly.size() < 3) {
         return false;
     }
-    for (Index w : poly) {
-        pts.push_back(tin_.points[w]);
+    for (Index u : poly) {
+        pts.push_back(tin_.points[u]);
     }
     if (border && orient2d(pts.back(), tin_.points[v], pts.front()) != 0) {
         return false; // a corner
@@ -89,7 +96,7 @@ bool Refiner::try_remove(Index v, std::vector<Index>& ring, const MergeLimits& l
     }
     // orient2d(pts[i], pts[j], pv) for i < j: the weights of v in every candidate triangle,
     // computed once per pair instead of three times per triangle.
-    auto& toward_v = scratch_.toward_v;
+    auto& toward_v = w.toward_v;
     if (v_counts) {
         toward_v.resize(n * n);
         for (std::size_t i = 0; i < n; ++i) {
@@ -138,14 +145,14 @@ bool Refiner::try_remove(Index v, std::vector<Index>& ring, const MergeLimits& l
                static_cast<std::size_t>(k);
     };
     enum : std::uint8_t { kUnknown, kEstimated, kExact, kRuledOut };
-    auto& state = scratch_.state;
+    auto& state = w.state;
     state.assign(n * n * n, kUnknown);
-    auto& estimate = scratch_.estimate;
+    auto& estimate = w.estimate;
     // Read only where state says it was written: grow, never shrink and refill.
     if (estimate.size() < n * n * n) {
         estimate.resize(n * n * n);
     }
-    auto& exact = scratch_.exact;
+    auto& exact = w.exact;
     exact.clear();
     const auto cost = [&](int i, int j, int k) -> std::optional<TriangleCost> {
         const std::size_t id = key(i, j, k);
@@ -188,7 +195,7 @@ bool Refiner::try_remove(Index v, std::vector<Index>& ring, const MergeLimits& l
     // Every re-triangulation has a triangle covering v. Those candidates are tried first, so
     // that a removal that cannot work usually fails after a few scans instead of all of them.
     // The sides found valid or not here are the dynamic program's too (the same test).
-    auto& dp = scratch_.dp;
+    auto& dp = w.dp;
     dp.side.assign(n * n, -1);
     if (v_counts) {
         const auto side_ok = [&](int i, int k) { return dp.side_ok(pts, &pv, i, k); };
@@ -258,23 +265,24 @@ bool Refiner::try_remove(Index v, std::vector<Index>& ring, const MergeLimits& l
         break;
     }
     // Outer twins of the hole's edges: poly[k] -> poly[k + 1] is the far edge of ring[k].
-    auto& outer = scratch_.outer;
+    auto& outer = w.outer;
     outer.assign(n, kNone);
     for (std::size_t k = 0; k < ring.size(); ++k) {
         outer[k] = tin_.halfedges[next_edge(ring[k])];
     }
     for (Index e : ring) {
-        release(e / 3);
+        release(e / 3, w);
     }
     tin_.vertex_edge[v] = kNone;
     // A diagonal poly[from] -> poly[to] waits in `diagonal` until its twin poly[to] -> poly[from]
     // comes with a later triangle.
-    auto& diagonal = scratch_.diagonal;
+    auto& diagonal = w.diagonal;
     diagonal.assign(n * n, kNone);
     for (const auto& [i, j, k] : *tris) {
-        const Index t = tin_.add_triangle(poly[static_cast<std::size_t>(i)],
-                                          poly[static_cast<std::size_t>(j)],
-                                          poly[static_cast<std::size_t>(k)]);
+        const Index t = add_triangle(poly[static_cast<std::size_t>(i)],
+                                     poly[static_cast<std::size_t>(j)],
+                                     poly[static_cast<std::size_t>(k)],
+                                     w);
         const std::array<int, 3> corner{i, j, k};
         for (int s = 0; s < 3; ++s) {
             const auto from = static_cast<std::size_t>(corner[static_cast<std::size_t>(s)]);
@@ -297,9 +305,29 @@ bool Refiner::try_remove(Index v, std::vector<Index>& ring, const MergeLimits& l
     return true;
 }
 
-std::size_t Refiner::merge_pass(const MergeLimits& limits) {
+void Refiner::release(Index t, MergeWorker& w) {
+    if (!w.local) {
+        release(t);
+        return;
+    }
+    set_stats(t, TriangleStats{});
+    tin_.clear_triangle(t);
+    w.slots.push_back(t);
+}
+
+Index Refiner::add_triangle(Index a, Index b, Index c, MergeWorker& w) {
+    if (!w.local) {
+        return tin_.add_triangle(a, b, c);
+    }
+    TB_ASSERT(!w.slots.empty());
+    const Index t = w.slots.back();
+    w.slots.pop_back();
+    tin_.fill_triangle(t, a, b, c);
+    return t;
+}
+
+LargeVector<Index> Refiner::merge_visit_list() {
     const std::size_t nv = tin_.points.size();
-    dirty_.resize(nv, 1);
     // The error points around each vertex, when there are any.
     LargeVector<std::int64_t> error_points;
     if (error_points_ != 0) {
@@ -346,18 +374,110 @@ std::size_t Refiner::merge_pass(const MergeLimits& limits) {
             visit[i] = order[i].v;
         }
     }
-    std::vector<Index> ring;
-    std::size_t removed = 0;
-    for (Index v : visit) {
+    return visit;
+}
+
+void Refiner::merge_region(
+    const LargeVector<Index>& visit, int side, int cut, MergeWorker& w, const MergeLimits& limits) {
+    // Strictly on this side of the cut.
+    const auto inside = [side, cut](GridPoint p) { return side == 0 ? p.x < cut : p.x > cut; };
+    for (std::size_t i = 0; i < visit.size(); ++i) {
+        const Index v = visit[i];
+        if (!inside(tin_.points[v])) {
+            if (side == 0 && tin_.points[v].x == cut) {
+                w.deferred.push_back(i);
+            }
+            continue;
+        }
+        if (tin_.vertex_edge[v] == kNone || dirty_[v] == 0) {
+            continue;
+        }
+        // Only this worker changes triangles whose vertices all lie on its side, and only
+        // those: a neighbourhood wholly on this side is this worker's alone.
+        tin_.ring(v, w.ring);
+        bool mine = true;
+        for (Index e : w.ring) {
+            const Index t = e / 3;
+            for (Index f = 3 * t; f < 3 * t + 3 && mine; ++f) {
+                mine = inside(tin_.points[tin_.triangles[f]]);
+            }
+        }
+        if (!mine) {
+            w.deferred.push_back(i);
+            continue;
+        }
+        dirty_[v] = 0;
+        if (try_remove(v, w, limits)) {
+            ++w.removed;
+        }
+    }
+}
+
+void Refiner::merge_serial(const LargeVector<Index>& visit,
+                           const std::vector<std::size_t>* order,
+                           MergeWorker& w,
+                           const MergeLimits& limits) {
+    const std::size_t n = order != nullptr ? order->size() : visit.size();
+    for (std::size_t k = 0; k < n; ++k) {
+        const Index v = visit[order != nullptr ? (*order)[k] : k];
         if (tin_.vertex_edge[v] == kNone || dirty_[v] == 0) {
             continue;
         }
         dirty_[v] = 0;
-        if (try_remove(v, ring, limits)) {
-            ++removed;
+        if (try_remove(v, w, limits)) {
+            ++w.removed;
         }
     }
-    return removed;
+}
+
+std::size_t Refiner::merge_pass(const MergeLimits& limits) {
+    dirty_.resize(tin_.points.size(), 1);
+    const LargeVector<Index> visit = merge_visit_list();
+    for (MergeWorker& w : workers_) {
+        w.removed = 0;
+        w.deferred.clear();
+        w.slots.clear();
+    }
+    const std::size_t samples =
+        static_cast<std::size_t>(grid_.width) * static_cast<std::size_t>(grid_.height);
+    if (samples < kRegionSamples || error_points_ != 0 || grid_.width < 8) {
+        merge_serial(visit, nullptr, workers_[0], limits);
+        return workers_[0].removed;
+    }
+    // The two halves apart. Stats, dirty flags and tin arrays are written per element, each
+    // by the worker whose side it belongs to; none of them grows (a removal frees more slots
+    // than it fills), and with no error points the split queue is only read.
+    if (stats_.size() < tin_.triangle_slots()) {
+        stats_.resize(tin_.triangle_slots());
+    }
+    const int cut = grid_.width / 2;
+    for (int side = 0; side < 2; ++side) {
+        workers_[side].local = true;
+    }
+    if (limits.threads >= 2) {
+        auto right = std::async(std::launch::async,
+                                [&] { merge_region(visit, 1, cut, workers_[1], limits); });
+        merge_region(visit, 0, cut, workers_[0], limits);
+        right.get();
+    } else {
+        merge_region(visit, 0, cut, workers_[0], limits);
+        merge_region(visit, 1, cut, workers_[1], limits);
+    }
+    // Then what is left, in visit order, with the tin's free list (the workers' spare slots
+    // added to it in a fixed order).
+    std::vector<std::size_t> rest(workers_[0].deferred.size() + workers_[1].deferred.size());
+    std::merge(workers_[0].deferred.begin(),
+               workers_[0].deferred.end(),
+               workers_[1].deferred.begin(),
+               workers_[1].deferred.end(),
+               rest.begin());
+    for (MergeWorker& w : workers_) {
+        tin_.free_triangles.insert(tin_.free_triangles.end(), w.slots.begin(), w.slots.end());
+        w.slots.clear();
+        w.local = false;
+    }
+    merge_serial(visit, &rest, workers_[0], limits);
+    return workers_[0].removed + workers_[1].removed;
 }
 
 } // namespace tb::core

@@ -23,6 +23,9 @@ struct MergeLimits {
     // Runs of the dynamic program per vertex: each re-run follows a chosen triangle that failed
     // its full scan (the program works on estimates, see merge.cpp).
     int max_attempts = 6;
+    // Threads a pass may use on a big grid (1 or 2; see merge_pass). The mesh is the same
+    // for either value.
+    int threads = 2;
 };
 
 class Refiner {
@@ -48,12 +51,18 @@ public:
     // error points around first, when there are any): a vertex is removed when the optimal
     // re-triangulation of its hole has no more error points than its neighbourhood had.
     // Vertices already tried whose neighbourhood has not changed since are skipped, and so are
-    // those whose hole is over limits.max_hole. Returns the number of vertices removed.
+    // those whose hole is over limits.max_hole. On a grid of kRegionSamples samples or more, with
+    // no error points, the pass first works the two halves left and right of the middle column
+    // apart (on two threads when limits.threads is 2): each visits, in the same order, the
+    // vertices whose neighbourhood lies wholly on its side, which no removal on the other side
+    // can touch; the vertices left over follow. Returns the number of vertices removed.
     std::size_t merge_pass(const MergeLimits& limits = {});
 
     // Renumbers vertices and triangles along a Z-order curve (Tin::compact) so that the merge
     // agent's walks stay in cache; caches and queue follow. Vertex indices change.
     void compact();
+
+    static constexpr std::size_t kRegionSamples = std::size_t{1} << 18;
 
     std::int64_t error_points() const { return error_points_; }
     const Tin& tin() const { return tin_; }
@@ -64,7 +73,45 @@ private:
     void set_stats(Index t, const TriangleStats& st); // also (re)queues t
     void release(Index t);                            // forgets t's stats, frees it
     void swap_around(Index p, std::vector<Index>& stack);
-    bool try_remove(Index v, std::vector<Index>& ring, const MergeLimits& limits);
+    // Working memory of try_remove, kept to save allocations: one per thread of the merge agent.
+    struct MergeWorker {
+        std::vector<Index> ring;
+        std::vector<Index> poly;
+        std::vector<GridPoint> pts;
+        std::vector<std::uint8_t> state;
+        std::vector<TriangleCost> estimate;
+        std::vector<std::pair<std::size_t, TriangleStats>> exact;
+        std::vector<std::int64_t> toward_v;
+        std::vector<Index> outer;
+        std::vector<Index> diagonal;
+        PolygonDpScratch dp;
+        // With `local` the worker frees triangles into `slots` and takes new ones from there,
+        // never from the tin's free list (another worker may be using it): a removal frees more
+        // triangles than it adds, so a worker never runs short.
+        bool local = false;
+        std::vector<Index> slots;
+        // Indices into the visit list of the vertices this worker left for later.
+        std::vector<std::size_t> deferred;
+        std::size_t removed = 0;
+    };
+    bool try_remove(Index v, MergeWorker& w, const MergeLimits& limits);
+    // The vertices merge_pass visits, in its order.
+    LargeVector<Index> merge_visit_list();
+    // Visits, in order, the vertices of `visit` strictly on one side (side 0: x < cut, 1:
+    // x > cut) whose every triangle lies strictly on that side; the others of that side (and,
+    // for side 0, those on the cut) go to w.deferred.
+    void merge_region(const LargeVector<Index>& visit,
+                      int side,
+                      int cut,
+                      MergeWorker& w,
+                      const MergeLimits& limits);
+    // Visits visit[i] for every i of `order` (ascending) with the tin's free list.
+    void merge_serial(const LargeVector<Index>& visit,
+                      const std::vector<std::size_t>* order,
+                      MergeWorker& w,
+                      const MergeLimits& limits);
+    void release(Index t, MergeWorker& w);
+    Index add_triangle(Index a, Index b, Index c, MergeWorker& w);
     // Squared length of t's longest edge and that edge (first of equals).
     std::int64_t longest_edge2(Index t, Index& edge) const;
     bool too_long(GridPoint a, GridPoint b) const { // inline: the merge agent asks per triangle
@@ -89,18 +136,7 @@ private:
     std::int64_t error_points_ = 0;
     // Vertex v's neighbourhood changed since the merge agent last failed to remove it.
     LargeVector<std::uint8_t> dirty_;
-    // Working memory of try_remove, kept to save allocations.
-    struct MergeScratch {
-        std::vector<Index> poly;
-        std::vector<GridPoint> pts;
-        std::vector<std::uint8_t> state;
-        std::vector<TriangleCost> estimate;
-        std::vector<std::pair<std::size_t, TriangleStats>> exact;
-        std::vector<std::int64_t> toward_v;
-        std::vector<Index> outer;
-        std::vector<Index> diagonal;
-        PolygonDpScratch dp;
-    } scratch_;
+    MergeWorker workers_[2];
 };
 
 } // namespace tb::core

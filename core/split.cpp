@@ -96,7 +96,10 @@ void Refiner::set_stats(Index t, const TriangleStats& st) {
     if (stats_.size() <= t) {
         stats_.resize(tin_.triangle_slots());
     }
-    error_points_ += st.error_points - stats_[t].error_points;
+    if (st.error_points != stats_[t].error_points) {
+        // Not written when both are 0: the merge agent's two workers set stats at once.
+        error_points_ += st.error_points - stats_[t].error_points;
+    }
     stats_[t] = st;
     if (dirty_.size() < tin_.points.size()) {
         dirty_.resize(tin_.points.size() + tin_.points.size() / 2, 1);

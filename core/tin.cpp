@@ -43,21 +43,29 @@ Index Tin::add_triangle(Index a, Index b, Index c) {
         triangles.resize(triangles.size() + 3);
         halfedges.resize(halfedges.size() + 3);
     }
+    fill_triangle(t, a, b, c);
+    return t;
+}
+
+void Tin::fill_triangle(Index t, Index a, Index b, Index c) {
     triangles[3 * t] = a;
     triangles[3 * t + 1] = b;
     triangles[3 * t + 2] = c;
     halfedges[3 * t] = halfedges[3 * t + 1] = halfedges[3 * t + 2] = kNone;
     TB_ASSERT(orient2d(points[a], points[b], points[c]) > 0);
     touch(t);
-    return t;
 }
 
 void Tin::free_triangle(Index t) {
+    clear_triangle(t);
+    free_triangles.push_back(t);
+}
+
+void Tin::clear_triangle(Index t) {
     for (Index e = 3 * t; e < 3 * t + 3; ++e) {
         triangles[e] = kNone;
         halfedges[e] = kNone;
     }
-    free_triangles.push_back(t);
 }
 
 void Tin::split_triangle(Index t, Index p, std::array<Index, 4>& out) {

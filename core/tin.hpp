@@ -50,6 +50,10 @@ struct Tin {
     // Removes triangle t (its twins must already be relinked or freed too).
     void free_triangle(Index t);
     Index add_triangle(Index a, Index b, Index c);
+    // The same two without the free list, for a caller that keeps its own free slots: clear
+    // marks t removed, fill makes the counter-clockwise (a, b, c) of the removed slot t.
+    void clear_triangle(Index t);
+    void fill_triangle(Index t, Index a, Index b, Index c);
     void link(Index e, Index f) {
         halfedges[e] = f;
         if (f != kNone) {

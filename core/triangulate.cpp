@@ -126,6 +126,10 @@ void check_input(const HeightGrid& grid, const TriangulateOptions& options) {
         throw InputError("effort " + std::to_string(static_cast<int>(options.effort)) +
                          " is not a level: expected fast, balanced or best");
     }
+    if (options.merge_threads != 1 && options.merge_threads != 2) {
+        throw InputError("merge_threads must be 1 or 2, got " +
+                         std::to_string(options.merge_threads));
+    }
     if (!std::isfinite(options.max_edge) || options.max_edge < 0.0 ||
         (options.max_edge > 0.0 && options.max_edge < kMinMaxEdge)) {
         throw InputError("max_edge must be 0 (no limit) or a finite length of at least " +
@@ -153,7 +157,8 @@ Mesh triangulate(const HeightGrid& grid,
     const HugePages huge_pages(options.huge_pages);
     const double eps = options.eps;
     const int max_step = max_step_for(options.max_edge);
-    const Plan plan = plan_for(options.effort);
+    Plan plan = plan_for(options.effort);
+    plan.merge.threads = options.merge_threads;
     const std::vector<GridPoint> anchors = anchor_points(grid, eps, max_step, plan.line_step);
     mark(&TriangulatePhases::anchors_ms);
     // With room for the split agent's vertices (Refiner::kGrowth), which compact() keeps.

@@ -52,6 +52,11 @@ struct TriangulateOptions {
     // always got, bit for bit; the tiler will choose the level (its config key `effort`, with
     // Balanced as the product's default) and record it with the tiles it publishes.
     Effort effort = Effort::Best;
+    // Threads the merge agent may use (1 or 2). On a grid of 2^18 samples or more (never a
+    // 257 x 257 tile) each merge pass first works the halves left and right of the middle
+    // column apart, on two threads when this is 2, one after the other when 1: the mesh is the
+    // same either way, bit for bit.
+    int merge_threads = 2;
 };
 
 inline constexpr double kMinMaxEdge = 1.5;
