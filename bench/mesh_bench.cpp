@@ -5,14 +5,14 @@
 // Exits 1 if any achieved_max_err > eps: the bound is the product, speed is secondary.
 //
 // usage: mesh_bench [--reps N] [--effort fast|balanced|best|all] [--json DIR] [--phases]
-//                   [--merge-threads 1|2] INPUT EPS[,EPS...] [INPUT EPS... ...]
+//                   [--threads 1|2] INPUT EPS[,EPS...] [INPUT EPS... ...]
 //   INPUT = NAME=FILE.f32:W:H  raw little-endian float32, row-major (shared/bench format)
 //         | synth:SEED:W:H     seeded synthetic terrain (ridges + noise, 0.1 height steps)
 // --effort picks core's TriangulateOptions::effort (default best, core's default); `all` runs
 // the three levels, alternated in every rep so that they see the same load, and prints a line
 // for each (fast, balanced, best).
-// --merge-threads sets TriangulateOptions::merge_threads (default 2, core's default; the mesh is
-// the same for 1).
+// --threads sets TriangulateOptions::threads (default 2, core's default; the mesh is the same
+// for 1).
 // --json DIR writes every mesh as DIR/NAME-epsE-LEVEL.json for shared/bench's linf_check.
 // --phases prints instead, per case, where the fastest run's time went (core's
 // TriangulatePhases; phases_ms is their sum):  input size eps phases_ms triangles anchors_ms
@@ -129,7 +129,7 @@ void write_json(const std::string& path, const tb::core::Mesh& m) {
 
 int main(int argc, char** argv) {
     int reps = 3;
-    int merge_threads = 2;
+    int threads = 2;
     bool phases = false;
     std::vector<tb::core::Effort> levels{tb::core::Effort::Best};
     std::string json_dir;
@@ -153,8 +153,8 @@ int main(int argc, char** argv) {
             }
             args.erase(args.begin() + static_cast<std::ptrdiff_t>(i),
                        args.begin() + static_cast<std::ptrdiff_t>(i) + 2);
-        } else if (args[i] == "--merge-threads" && i + 1 < args.size()) {
-            merge_threads = std::stoi(args[i + 1]);
+        } else if (args[i] == "--threads" && i + 1 < args.size()) {
+            threads = std::stoi(args[i + 1]);
             args.erase(args.begin() + static_cast<std::ptrdiff_t>(i),
                        args.begin() + static_cast<std::ptrdiff_t>(i) + 2);
         } else if (args[i] == "--phases") {
@@ -174,7 +174,7 @@ int main(int argc, char** argv) {
     }
     if (args.empty() || args.size() % 2 != 0) {
         std::cerr << "usage: mesh_bench [--reps N] [--effort fast|balanced|best|all] [--json DIR]"
-                     " [--phases] [--merge-threads 1|2] INPUT EPS[,EPS...] ...\n"
+                     " [--phases] [--threads 1|2] INPUT EPS[,EPS...] ...\n"
                      "  INPUT = NAME=FILE.f32:W:H | synth:SEED:W:H\n";
         return 2;
     }
@@ -206,12 +206,10 @@ int main(int argc, char** argv) {
                 for (std::size_t l = 0; l < nl; ++l) {
                     tb::core::TriangulatePhases run;
                     const auto t0 = std::chrono::steady_clock::now();
-                    meshes[l] = tb::core::triangulate(g,
-                                                      {.eps = eps,
-                                                       .lock_border = true,
-                                                       .effort = levels[l],
-                                                       .merge_threads = merge_threads},
-                                                      phases ? &run : nullptr);
+                    meshes[l] = tb::core::triangulate(
+                        g,
+                        {.eps = eps, .lock_border = true, .effort = levels[l], .threads = threads},
+                        phases ? &run : nullptr);
                     const auto t1 = std::chrono::steady_clock::now();
                     times[l].push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
                     if (r == 0 || run.total_ms() < fastest[l].total_ms()) {

@@ -10,6 +10,7 @@
 #include "core/error.hpp"
 #include "core/predicates.hpp"
 #include "core/triangulate.hpp"
+#include "core/two_threads.hpp"
 
 namespace tb::core {
 namespace {
@@ -213,10 +214,37 @@ std::vector<int> row_breakpoints(const HeightGrid& grid, double eps, int y, int 
     return fit_breakpoints(z, valid, eps, max_step);
 }
 
+// The interior breakpoints of scan lines (column x for {true, x}, row y for {false, y}) appended
+// to pts; with threads = 2 the lines' two halves are fitted on two threads. Only a scan line's
+// interior breakpoints are anchors: its ends lie on the other two borders, whose vertices are
+// exactly their own fits.
+void add_lines(const HeightGrid& grid,
+               double eps,
+               int cap,
+               const std::vector<std::pair<bool, int>>& lines,
+               int threads,
+               std::vector<GridPoint>& pts) {
+    const auto fit = [&](std::size_t from, std::size_t to, std::vector<GridPoint>& out) {
+        for (std::size_t i = from; i < to; ++i) {
+            const auto [column, at] = lines[i];
+            const auto cuts = column ? column_breakpoints(grid, eps, at, cap)
+                                     : row_breakpoints(grid, eps, at, cap);
+            for (std::size_t k = 1; k + 1 < cuts.size(); ++k) {
+                out.push_back(column ? GridPoint{at, cuts[k]} : GridPoint{cuts[k], at});
+            }
+        }
+    };
+    const std::size_t half = lines.size() / 2;
+    std::vector<GridPoint> second;
+    run_both(
+        threads >= 2, [&] { fit(0, half, pts); }, [&] { fit(half, lines.size(), second); });
+    pts.insert(pts.end(), second.begin(), second.end());
+}
+
 } // namespace
 
 std::vector<GridPoint>
-anchor_points(const HeightGrid& grid, double eps, int max_step, int line_step) {
+anchor_points(const HeightGrid& grid, double eps, int max_step, int line_step, int threads) {
     TB_ASSERT(max_step >= 0 && line_step >= 0);
     const int w = grid.width;
     const int h = grid.height;
@@ -240,31 +268,19 @@ anchor_points(const HeightGrid& grid, double eps, int max_step, int line_step) {
     // The interior lines' cap: the tighter of max_step and line_step (0 = none).
     const int line_cap =
         line_step == 0 ? max_step : (max_step == 0 ? line_step : std::min(max_step, line_step));
-    // Only a scan line's interior breakpoints are anchors: its ends lie on the other two
-    // borders, whose vertices are exactly their own fits.
-    const auto add_column = [&](int x) {
-        const auto ys = column_breakpoints(grid, eps, x, line_cap);
-        for (std::size_t k = 1; k + 1 < ys.size(); ++k) {
-            pts.push_back({x, ys[k]});
-        }
-    };
-    const auto add_row = [&](int y) {
-        const auto xs = row_breakpoints(grid, eps, y, line_cap);
-        for (std::size_t k = 1; k + 1 < xs.size(); ++k) {
-            pts.push_back({xs[k], y});
-        }
-    };
     // The paper's scan lines: vertical ones through the breakpoints of the horizontal border
     // with fewer of them (top on ties), horizontal ones through those of the vertical border
     // with fewer (left on ties).
     const std::vector<int>& cols = bottom.size() < top.size() ? bottom : top;
     const std::vector<int>& rows = right.size() < left.size() ? right : left;
+    std::vector<std::pair<bool, int>> lines;
     for (std::size_t i = 1; i + 1 < cols.size(); ++i) {
-        add_column(cols[i]);
+        lines.push_back({true, cols[i]});
     }
     for (std::size_t i = 1; i + 1 < rows.size(); ++i) {
-        add_row(rows[i]);
+        lines.push_back({false, rows[i]});
     }
+    add_lines(grid, eps, line_cap, lines, threads, pts);
     // The scan lines through the other two borders' breakpoints too, when the anchors stay
     // few (see kAnchorBudget). Judged by a forecast (each new line has as many interior
     // breakpoints as the two borders parallel to it have on average), so no line is fitted to
@@ -283,16 +299,18 @@ anchor_points(const HeightGrid& grid, double eps, int max_step, int line_step) {
                             static_cast<double>(all_cols.size() - cols.size()) * per_column +
                             static_cast<double>(all_rows.size() - rows.size()) * per_row;
     if (forecast <= kAnchorBudget * static_cast<double>(w) * static_cast<double>(h)) {
+        lines.clear();
         for (std::size_t i = 1; i + 1 < all_cols.size(); ++i) {
             if (!std::binary_search(cols.begin(), cols.end(), all_cols[i])) {
-                add_column(all_cols[i]);
+                lines.push_back({true, all_cols[i]});
             }
         }
         for (std::size_t i = 1; i + 1 < all_rows.size(); ++i) {
             if (!std::binary_search(rows.begin(), rows.end(), all_rows[i])) {
-                add_row(all_rows[i]);
+                lines.push_back({false, all_rows[i]});
             }
         }
+        add_lines(grid, eps, line_cap, lines, threads, pts);
     }
     std::sort(pts.begin(), pts.end(), raster_less);
     pts.erase(std::unique(pts.begin(), pts.end()), pts.end());

@@ -43,8 +43,9 @@ struct HeightGrid;
 // fit_breakpoints, for every fit. line_step >= 1 caps the interior scan lines' segments further
 // (the borders' fits never see it): each such fit then costs O(samples * line_step) instead of
 // O(samples * reach), where a coarse eps lets a segment reach far; 0 = no further cap.
-std::vector<GridPoint>
-anchor_points(const HeightGrid& grid, double eps, int max_step = 0, int line_step = 0);
+// threads = 2 fits the scan lines in two halves on two threads (the same anchors).
+std::vector<GridPoint> anchor_points(
+    const HeightGrid& grid, double eps, int max_step = 0, int line_step = 0, int threads = 1);
 
 // The breakpoints of one border: side 0 = top row (y = 0), 1 = bottom row, 2 = left column
 // (x = 0), 3 = right column; positions along the border.

@@ -10,6 +10,7 @@
 #include "core/memory.hpp"
 #include "core/predicates.hpp"
 #include "core/triangulate.hpp"
+#include "core/two_threads.hpp"
 
 namespace tb::core {
 namespace {
@@ -106,6 +107,12 @@ public:
         bits_[w1] |= tail;
     }
     // True when every sample with valid[i] != 0 (every sample when valid is empty) is marked.
+    // Adds other's marks (the same number of samples).
+    void merge(const Coverage& other) {
+        for (std::size_t k = 0; k < bits_.size(); ++k) {
+            bits_[k] |= other.bits_[k];
+        }
+    }
     bool covers(const std::vector<std::uint8_t>& valid) const {
         for (std::size_t k = 0; k < bits_.size(); ++k) {
             if (bits_[k] == ~std::uint64_t{0}) {
@@ -126,15 +133,16 @@ private:
     std::size_t samples_;
 };
 
-} // namespace
-
-double max_error(const Mesh& mesh, const HeightGrid& grid) {
-    // Every triangle is scanned over its closed area, so a sample on an edge is judged by every
-    // triangle that touches it; a valid sample covered by none makes the error infinite.
+// The largest error of the samples of triangles [from, to), each over its closed area; marks
+// them in covered.
+double judge_triangles(const Mesh& mesh,
+                       const HeightGrid& grid,
+                       std::size_t begin,
+                       std::size_t end,
+                       Coverage& covered) {
     const int w = grid.width;
-    Coverage covered(static_cast<std::size_t>(w) * grid.height);
     double worst = 0.0;
-    for (std::size_t t = 0; t < mesh.triangle_count(); ++t) {
+    for (std::size_t t = begin; t < end; ++t) {
         const Index ia = mesh.triangles[3 * t], ib = mesh.triangles[3 * t + 1],
                     ic = mesh.triangles[3 * t + 2];
         const GridPoint a = mesh.points[ia], b = mesh.points[ib], c = mesh.points[ic];
@@ -216,6 +224,30 @@ double max_error(const Mesh& mesh, const HeightGrid& grid) {
             judge(hi);
         }
     }
+    return worst;
+}
+
+} // namespace
+
+double max_error(const Mesh& mesh, const HeightGrid& grid, int threads) {
+    // Every triangle is scanned over its closed area, so a sample on an edge is judged by every
+    // triangle that touches it; a valid sample covered by none makes the error infinite. Two
+    // threads judge a half of the triangles each, with a coverage each.
+    const std::size_t samples = static_cast<std::size_t>(grid.width) * grid.height;
+    const std::size_t n = mesh.triangle_count(), half = threads >= 2 ? n / 2 : n;
+    Coverage covered(samples);
+    double worst = 0.0, second_worst = 0.0;
+    if (half == n) {
+        worst = judge_triangles(mesh, grid, 0, n, covered);
+    } else {
+        Coverage second(samples);
+        run_both(
+            true,
+            [&] { worst = judge_triangles(mesh, grid, 0, half, covered); },
+            [&] { second_worst = judge_triangles(mesh, grid, half, n, second); });
+        covered.merge(second);
+    }
+    worst = std::max(worst, second_worst);
     return covered.covers(grid.valid) ? worst : std::numeric_limits<double>::infinity();
 }
 

@@ -19,13 +19,13 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <future>
 
 #include "core/error.hpp"
 #include "core/memory.hpp"
 #include "core/polygon_dp.hpp"
 #include "core/predicates.hpp"
 #include "core/refiner.hpp"
+#include "core/two_threads.hpp"
 
 namespace tb::core {
 namespace {
@@ -440,7 +440,7 @@ std::size_t Refiner::merge_pass(const MergeLimits& limits) {
     }
     const std::size_t samples =
         static_cast<std::size_t>(grid_.width) * static_cast<std::size_t>(grid_.height);
-    if (samples < kRegionSamples || error_points_ != 0 || grid_.width < 8) {
+    if (samples < kTwoThreadSamples || error_points_ != 0 || grid_.width < 8) {
         merge_serial(visit, nullptr, workers_[0], limits);
         return workers_[0].removed;
     }
@@ -454,15 +454,10 @@ std::size_t Refiner::merge_pass(const MergeLimits& limits) {
     for (int side = 0; side < 2; ++side) {
         workers_[side].local = true;
     }
-    if (limits.threads >= 2) {
-        auto right = std::async(std::launch::async,
-                                [&] { merge_region(visit, 1, cut, workers_[1], limits); });
-        merge_region(visit, 0, cut, workers_[0], limits);
-        right.get();
-    } else {
-        merge_region(visit, 0, cut, workers_[0], limits);
-        merge_region(visit, 1, cut, workers_[1], limits);
-    }
+    run_both(
+        limits.threads >= 2,
+        [&] { merge_region(visit, 0, cut, workers_[0], limits); },
+        [&] { merge_region(visit, 1, cut, workers_[1], limits); });
     // Then what is left, in visit order, with the tin's free list (the workers' spare slots
     // added to it in a fixed order).
     std::vector<std::size_t> rest(workers_[0].deferred.size() + workers_[1].deferred.size());

@@ -37,8 +37,15 @@ public:
 
     // Takes the initial triangulation (§3.1) and scans every triangle. grid must outlive the
     // refiner (it is kept by reference); eps > 0; max_edge 0 (no limit) or >= kMinMaxEdge,
-    // and with lock_border the border edges of tin already within max_edge.
-    Refiner(const HeightGrid& grid, double eps, bool lock_border, double max_edge, Tin tin);
+    // and with lock_border the border edges of tin already within max_edge. threads (1 or 2):
+    // on a grid of kTwoThreadSamples or more, the scan of the start's triangles is split in
+    // two halves on two threads (the same stats either way).
+    Refiner(const HeightGrid& grid,
+            double eps,
+            bool lock_border,
+            double max_edge,
+            Tin tin,
+            int threads = 1);
 
     // The split agent (split.cpp): while some valid sample is over eps, insert the worst sample
     // of the triangle with the most error points and swap diagonals around it. When none is,
@@ -51,7 +58,7 @@ public:
     // error points around first, when there are any): a vertex is removed when the optimal
     // re-triangulation of its hole has no more error points than its neighbourhood had.
     // Vertices already tried whose neighbourhood has not changed since are skipped, and so are
-    // those whose hole is over limits.max_hole. On a grid of kRegionSamples samples or more, with
+    // those whose hole is over limits.max_hole. On a grid of kTwoThreadSamples or more, with
     // no error points, the pass first works the two halves left and right of the middle column
     // apart (on two threads when limits.threads is 2): each visits, in the same order, the
     // vertices whose neighbourhood lies wholly on its side, which no removal on the other side
@@ -61,8 +68,6 @@ public:
     // Renumbers vertices and triangles along a Z-order curve (Tin::compact) so that the merge
     // agent's walks stay in cache; caches and queue follow. Vertex indices change.
     void compact();
-
-    static constexpr std::size_t kRegionSamples = std::size_t{1} << 18;
 
     std::int64_t error_points() const { return error_points_; }
     const Tin& tin() const { return tin_; }

@@ -17,6 +17,7 @@
 #include "core/error.hpp"
 #include "core/predicates.hpp"
 #include "core/refiner.hpp"
+#include "core/two_threads.hpp"
 
 namespace tb::core {
 
@@ -44,7 +45,8 @@ std::int64_t max_length2(double max_edge) {
 
 } // namespace
 
-Refiner::Refiner(const HeightGrid& grid, double eps, bool lock_border, double max_edge, Tin tin)
+Refiner::Refiner(
+    const HeightGrid& grid, double eps, bool lock_border, double max_edge, Tin tin, int threads)
     : grid_(grid), eps_(eps), lock_border_(lock_border), max_edge_(max_edge),
       max_edge2_floor_(max_length2(max_edge)), tin_(std::move(tin)) {
     // The split agent adds vertices to the start's anchors: room for kGrowth times as many, so
@@ -55,9 +57,25 @@ Refiner::Refiner(const HeightGrid& grid, double eps, bool lock_border, double ma
     stats_.reserve(2 * room);
     dirty_.reserve(room + room / 2); // set_stats grows it by half at a time
     queue_.reserve(2 * room);
-    for (Index t = 0; t < tin_.triangle_slots(); ++t) {
+    // The scans read the grid and the tin only: two halves of the slots at once on a big grid,
+    // then their stats in slot order.
+    const Index slots = static_cast<Index>(tin_.triangle_slots());
+    const bool two = threads >= 2 &&
+                     static_cast<std::size_t>(grid.width) * static_cast<std::size_t>(grid.height) >=
+                         kTwoThreadSamples;
+    std::vector<TriangleStats> scanned(slots);
+    const auto scan_slots = [&](Index from, Index to) {
+        for (Index t = from; t < to; ++t) {
+            if (tin_.alive(t)) {
+                scanned[t] = scan(t);
+            }
+        }
+    };
+    run_both(
+        two, [&] { scan_slots(0, slots / 2); }, [&] { scan_slots(slots / 2, slots); });
+    for (Index t = 0; t < slots; ++t) {
         if (tin_.alive(t)) {
-            set_stats(t, scan(t));
+            set_stats(t, scanned[t]);
         }
     }
 }

@@ -16,6 +16,7 @@
 #include "core/error.hpp"
 #include "core/memory.hpp"
 #include "core/refiner.hpp"
+#include "core/two_threads.hpp"
 
 namespace tb::core {
 namespace {
@@ -126,9 +127,8 @@ void check_input(const HeightGrid& grid, const TriangulateOptions& options) {
         throw InputError("effort " + std::to_string(static_cast<int>(options.effort)) +
                          " is not a level: expected fast, balanced or best");
     }
-    if (options.merge_threads != 1 && options.merge_threads != 2) {
-        throw InputError("merge_threads must be 1 or 2, got " +
-                         std::to_string(options.merge_threads));
+    if (options.threads != 1 && options.threads != 2) {
+        throw InputError("threads must be 1 or 2, got " + std::to_string(options.threads));
     }
     if (!std::isfinite(options.max_edge) || options.max_edge < 0.0 ||
         (options.max_edge > 0.0 && options.max_edge < kMinMaxEdge)) {
@@ -158,15 +158,20 @@ Mesh triangulate(const HeightGrid& grid,
     const double eps = options.eps;
     const int max_step = max_step_for(options.max_edge);
     Plan plan = plan_for(options.effort);
-    plan.merge.threads = options.merge_threads;
-    const std::vector<GridPoint> anchors = anchor_points(grid, eps, max_step, plan.line_step);
+    // Big grids split the phases that allow it in two (TriangulateOptions::threads).
+    const bool big = static_cast<std::size_t>(grid.width) * static_cast<std::size_t>(grid.height) >=
+                     kTwoThreadSamples;
+    const int threads = big ? options.threads : 1;
+    plan.merge.threads = threads;
+    const std::vector<GridPoint> anchors =
+        anchor_points(grid, eps, max_step, plan.line_step, threads);
     mark(&TriangulatePhases::anchors_ms);
     // With room for the split agent's vertices (Refiner::kGrowth), which compact() keeps.
     Tin start = delaunay_rectangle(
         grid.width, grid.height, anchors, Refiner::kGrowth * (anchors.size() + 4));
     start.compact(); // triangles in Z-order, so the split agent's rescans stay local
     mark(&TriangulatePhases::start_ms);
-    Refiner refiner(grid, eps, options.lock_border, options.max_edge, std::move(start));
+    Refiner refiner(grid, eps, options.lock_border, options.max_edge, std::move(start), threads);
     mark(&TriangulatePhases::first_scan_ms);
     refiner.split_until_clean();
     mark(&TriangulatePhases::split_ms);
@@ -194,7 +199,7 @@ Mesh triangulate(const HeightGrid& grid,
     // The guarantee, checked in every build: O(triangles + samples), a few percent of the run.
     check_mesh(mesh, grid.width, grid.height);
     if (options.check_error) {
-        const double err = max_error(mesh, grid);
+        const double err = max_error(mesh, grid, threads);
         if (!(err <= eps)) {
             throw Error("triangulate: internal error: mesh misses a sample by " + number(err) +
                         " > eps " + number(eps));

@@ -52,11 +52,12 @@ struct TriangulateOptions {
     // always got, bit for bit; the tiler will choose the level (its config key `effort`, with
     // Balanced as the product's default) and record it with the tiles it publishes.
     Effort effort = Effort::Best;
-    // Threads the merge agent may use (1 or 2). On a grid of 2^18 samples or more (never a
-    // 257 x 257 tile) each merge pass first works the halves left and right of the middle
-    // column apart, on two threads when this is 2, one after the other when 1: the mesh is the
+    // Threads the mesher may use (1 or 2). On a grid of 2^18 samples or more (never a 257 x 257
+    // tile) the scan lines' fits, the first error scan and the final error check split their
+    // work in two, and each merge pass first works the halves left and right of the middle
+    // column apart: on two threads when this is 2, one after the other when 1. The mesh is the
     // same either way, bit for bit.
-    int merge_threads = 2;
+    int threads = 2;
 };
 
 inline constexpr double kMinMaxEdge = 1.5;
@@ -120,7 +121,8 @@ Mesh triangulate_strips(const HeightGrid& grid,
 inline constexpr int kMinStripColumns = 33;
 
 // Largest |mesh - height| over the valid samples, by exact point location (the guarantee check).
-double max_error(const Mesh& mesh, const HeightGrid& grid);
+// With threads = 2 the triangles are judged in two halves on two threads (the same result).
+double max_error(const Mesh& mesh, const HeightGrid& grid, int threads = 1);
 
 // Verifies twin symmetry, CCW orientation, no zero-area triangle, border edges on the grid
 // boundary, and that the triangles' total area equals (W-1)(H-1). Throws tb::Error on failure.

@@ -307,10 +307,11 @@ TEST_CASE("triangulate_strips keeps the bound and the cut columns' fits at every
     }
 }
 
-TEST_CASE("a grid of 2^18 samples merges its halves apart: the same mesh on 1 or 2 threads") {
-    // 521 x 521 > 2^18 samples: every merge pass works the halves left and right of column 260
-    // apart, then the vertices whose neighbourhood crosses it. Bound, tiling, determinism, and
-    // the same mesh bit for bit whether the halves run on one thread or two.
+TEST_CASE("a grid of 2^18 samples splits its work in two: the same mesh on 1 or 2 threads") {
+    // 521 x 521 > 2^18 samples: the scan lines' fits, the first scan and the error check run in
+    // halves, and every merge pass works the halves left and right of column 260 apart, then the
+    // vertices whose neighbourhood crosses it. Bound, tiling, determinism, and the same mesh bit
+    // for bit whether the halves run on one thread or two.
     const HeightGrid g = terrain::noise(521, 521, 41, 200.0, 3.0);
     REQUIRE(static_cast<std::size_t>(g.width) * g.height >= std::size_t{1} << 18);
     for (const Effort effort : kLevels) {
@@ -320,19 +321,21 @@ TEST_CASE("a grid of 2^18 samples merges its halves apart: the same mesh on 1 or
             INFO(tb::core::to_string(effort), " lock_border=", lock, " eps=", eps);
             TriangulateOptions opt{
                 .eps = eps, .lock_border = lock, .max_edge = max_edge, .effort = effort};
-            CHECK(opt.merge_threads == 2);
+            CHECK(opt.threads == 2);
             const Mesh two = mesh_and_judge(g, opt);
-            opt.merge_threads = 1;
+            opt.threads = 1;
             const Mesh one = tb::core::triangulate(g, opt);
             CHECK(one.points == two.points);
             CHECK(one.z == two.z);
             CHECK(one.triangles == two.triangles);
             CHECK(one.halfedges == two.halfedges);
+            CHECK(tb::core::max_error(two, g, 2) == tb::core::max_error(two, g, 1));
         }
     }
+    CHECK(tb::core::anchor_points(g, 2.0, 0, 0, 2) == tb::core::anchor_points(g, 2.0, 0, 0, 1));
     TriangulateOptions bad{.eps = 2.0};
     for (int threads : {0, 3, -1}) {
-        bad.merge_threads = threads;
+        bad.threads = threads;
         CHECK_THROWS_AS(tb::core::check_input(g, bad), tb::InputError);
     }
 }
