@@ -4,7 +4,7 @@
 # binary. Every effort level of ours (core::Effort) in the same run. Not a test.
 #
 #   [HMM=/path/to/hmm] bench/mesh_bench.sh [--reps N] [--quick] [--effort fast|balanced|best|all]
-#                                          [--svg FILE] [--instructions] [--phases]
+#                                          [--threads 1|2] [--svg FILE] [--instructions] [--phases]
 #
 # Builds bench/mesh_bench with Release flags into build-bench (core/ alone), copies
 # ../shared/bench (read-only) to bench/runs/peer (git-ignored), installs delatin there with
@@ -21,6 +21,10 @@
 # Without HMM the hmm columns are "-". linf_check is the shared independent checker's verdict
 # on our mesh. The table is also written to bench/runs/mesh_bench.tsv. Exits 1 if any of our
 # meshes misses a sample by more than eps.
+# --threads is core's TriangulateOptions::threads (default 2, core's default): on these grids
+# (2^18 samples and more) the mesher splits its fits, first scan, merge passes and final check
+# in two halves, on two threads with 2 and one after the other with 1 (the same meshes).
+# --instructions always counts with 1 (callgrind would not count the second thread's work).
 # --svg FILE then draws triangles against time per case (bench/mesh_curve.mjs): our levels as
 # a curve, hmm and delatin as marks, both axes as ratios to hmm (to delatin without HMM).
 # --instructions then counts, under valgrind's callgrind, the instructions each mesher executes
@@ -52,17 +56,20 @@ quick=0
 instructions=0
 phases=0
 effort=all
+threads=2
 svg=
 while [ $# -gt 0 ]; do
     case $1 in
         --reps) reps=$2; shift 2 ;;
         --quick) quick=1; shift ;;
         --effort) effort=$2; shift 2 ;;
+        --threads) threads=$2; shift 2 ;;
         --svg) svg=$2; shift 2 ;;
         --instructions) instructions=1; shift ;;
         --phases) phases=1; shift ;;
         *) echo "usage: [HMM=/path/to/hmm] $0 [--reps N] [--quick]" \
-               "[--effort fast|balanced|best|all] [--svg FILE] [--instructions] [--phases]" >&2
+               "[--effort fast|balanced|best|all] [--threads 1|2] [--svg FILE] [--instructions]" \
+               "[--phases]" >&2
            exit 2 ;;
     esac
 done
@@ -164,7 +171,7 @@ for c in "${cases[@]}"; do
         for eps in ${epss//,/ }; do
             json=()
             [ "$r" = 0 ] && json=(--json "$runs/meshes")
-            lines=$("$bench" --reps 1 --effort "$effort" "${json[@]}" \
+            lines=$("$bench" --reps 1 --effort "$effort" --threads "$threads" "${json[@]}" \
                 "$name=data/$name.f32:$size:$size" "$eps" | tail -n +2) || status=1
             [ "$r" = 0 ] && ours+="$lines"$'\n'
             while IFS=$'\t' read -r _ _ _ t _ _ _ _ level; do
@@ -243,8 +250,8 @@ if [ "$instructions" = 1 ]; then
                 fi
             fi
             for level in "${levels[@]}"; do
-                ir=$(count_ir 'tb::core::triangulate(*' "$bench" --reps 1 --effort "$level" \
-                    "$name=data/$name.f32:$size:$size" "$eps")
+                ir=$(count_ir 'tb::core::triangulate(*' "$bench" --reps 1 --threads 1 \
+                    --effort "$level" "$name=data/$name.f32:$size:$size" "$eps")
                 hcols="-\t-"
                 if [ -n "$hir" ]; then
                     hcols=$(awk -v a="$ir" -v b="$hir" 'BEGIN { printf "%.0f\t%.3f", b, b / a }')
@@ -262,7 +269,8 @@ if [ "$phases" = 1 ]; then
     printf '\tto_split_speed\tmerge_of_hmm\n'
     for c in "${cases[@]}"; do
         read -r name size epss <<< "$c"
-        "$bench" --phases --reps "$reps" --effort "$effort" "$name=data/$name.f32:$size:$size" \
+        "$bench" --phases --reps "$reps" --effort "$effort" --threads "$threads" \
+            "$name=data/$name.f32:$size:$size" \
             "$epss" | tail -n +2 |
             while IFS=$'\t' read -r _ sz eps ms _ an st fs sp rs rn mg fin _ stris _ _ level; do
                 h=${hmm_ms["$name $eps"]:-}
