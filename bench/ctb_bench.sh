@@ -132,7 +132,7 @@ stats() { # label dir [--geoid G]
         --tiles "$W/$label-tiles.tsv" "$@" | tail -n +2 | sed 's/^/zoom\t/'
 }
 if step stats; then
-printf 'zoom\tlabel\tzoom\ttiles\tgzip_kb_total\tgzip_kb_median\tgzip_kb_max\tmesh_gzip_kb_median\ttri_median\ttri_max\tdata_tiles\terr_median\terr_max\tpixels\tuncovered\tpub_median\tratio_median\tratio_max\ttri_median_data\tgzip_kb_median_data\n'
+printf 'zoom\tlabel\tzoom\ttiles\tgzip_kb_total\tgzip_kb_median\tgzip_kb_max\tmesh_gzip_kb_median\ttri_median\ttri_max\tdata_tiles\terr_median\terr_max\tpixels\tuncovered\tpub_median\tratio_median\tratio_max\ttri_median_data\tgzip_kb_median_data\tinner_err_median\tinner_err_max\n'
 stats terrabound "$TB_OUT/terrain" --geoid "$GEOID"
 stats ctb "$CTB_OUT"
 if [[ $CTB_NATIVE == 1 && -d $W/ctb-native ]]; then stats ctb-native "$W/ctb-native"; fi

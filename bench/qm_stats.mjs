@@ -22,12 +22,16 @@
 // Prints one TSV line per zoom (header first):
 //   label zoom tiles gzip_kb_total gzip_kb_median gzip_kb_max mesh_gzip_kb_median tri_median
 //   tri_max data_tiles err_median err_max pixels uncovered pub_median ratio_median ratio_max
-//   tri_median_data gzip_kb_median_data
+//   tri_median_data gzip_kb_median_data inner_err_median inner_err_max
 // err_* and *_data are over the tiles with at least one valid pixel ("data tiles"; the others
 // are filler over nodata or beside the DEM), err_median being the median of the tiles'
 // worst); pub_median is the median published bound (of the data tiles, with --dem); ratio =
 // a tile's measured worst / its published bound (median and largest over the data tiles that
-// publish one; above 1 the bound is broken). --tiles writes one line per tile.
+// publish one; above 1 the bound is broken). inner_err_* are the same as err_* over the pixels
+// at least two 256ths of a tile's width inside the DEM's outer edge (a tile whose samples reach
+// past the DEM's edge may draw the edge from heights that are not the data's; "-" when no
+// tile has such a pixel, as at zooms whose tiles are much wider than the DEM). --tiles writes
+// one line per tile.
 import { execFileSync } from "node:child_process";
 import fs from "node:fs";
 import path from "node:path";
@@ -183,7 +187,11 @@ function tileError(m, z, x, y) {
     const av = (gt[3] + 0.5 * gt[5] - south) * q, bv = gt[5] * q; // V(j) = av + bv j (bv < 0)
     const { u, v, h, idx, tc } = m;
     const e = 1e-7; // in u,v units
-    let worst = -1;
+    // the pixels at least 2 / 256 of the tile's width inside the DEM's outer edge
+    const mg = (2 * d) / 256;
+    const ii0 = Math.ceil((mg) / gt[1] - 0.5), ii1 = Math.floor((W * gt[1] - mg) / gt[1] - 0.5);
+    const ji0 = Math.ceil((mg) / -gt[5] - 0.5), ji1 = Math.floor((H * -gt[5] - mg) / -gt[5] - 0.5);
+    let worst = -1, inner = -1;
     const ex = new Float64Array(4), ey = new Float64Array(4);
     for (let t = 0; t < tc; ++t) {
         const A = idx[3 * t], B = idx[3 * t + 1], C = idx[3 * t + 2];
@@ -225,19 +233,22 @@ function tileError(m, z, x, y) {
                 if (nodata !== null && p === nodata) continue;
                 const err = Math.abs(ha + wb * dhb + wc * dhc - p);
                 if (err > worst) worst = err;
+                if (err > inner && i >= ii0 && i <= ii1 && j >= ji0 && j <= ji1) inner = err;
             }
         }
     }
-    let pixels = 0, uncovered = 0;
+    let pixels = 0, uncovered = 0, innerPixels = 0;
     for (let j = j0; j <= j1; ++j) {
         for (let i = i0; i <= i1; ++i) {
             const p = px[j * W + i];
             if (nodata !== null && p === nodata) continue;
             ++pixels;
+            if (i >= ii0 && i <= ii1 && j >= ji0 && j <= ji1) ++innerPixels;
             if (!mark[(j - j0) * nw + (i - i0)]) ++uncovered;
         }
     }
-    return pixels ? { worst: Math.max(worst, 0), pixels, uncovered } : null;
+    const innerWorst = innerPixels ? Math.max(inner, 0) : null;
+    return pixels ? { worst: Math.max(worst, 0), pixels, uncovered, inner: innerWorst } : null;
 }
 
 // ---- walk the pyramid ----
@@ -251,7 +262,7 @@ const fmt = (x, p = 2) => (Number.isFinite(x) ? x.toFixed(p) : "-");
 const tilesOut = opt.tiles ? fs.openSync(opt.tiles, "w") : null;
 if (tilesOut) fs.writeSync(tilesOut, "label\tz\tx\ty\ttriangles\tvertices\tgzip\tmesh_gzip\tworst_m\tpixels\tuncovered\tpublished_m\n");
 console.log(
-    "label\tzoom\ttiles\tgzip_kb_total\tgzip_kb_median\tgzip_kb_max\tmesh_gzip_kb_median\ttri_median\ttri_max\tdata_tiles\terr_median\terr_max\tpixels\tuncovered\tpub_median\tratio_median\tratio_max\ttri_median_data\tgzip_kb_median_data"
+    "label\tzoom\ttiles\tgzip_kb_total\tgzip_kb_median\tgzip_kb_max\tmesh_gzip_kb_median\ttri_median\ttri_max\tdata_tiles\terr_median\terr_max\tpixels\tuncovered\tpub_median\tratio_median\tratio_max\ttri_median_data\tgzip_kb_median_data\tinner_err_median\tinner_err_max"
 );
 const zooms = fs.readdirSync(dir).filter((s) => /^\d+$/.test(s)).map(Number).sort((a, b) => a - b);
 for (const z of zooms) {
@@ -277,6 +288,7 @@ for (const z of zooms) {
     const withErr = rows.filter((r) => r.err);
     const worst = withErr.map((r) => r.err.worst);
     const ratios = withErr.filter((r) => r.pub > 0).map((r) => r.err.worst / r.pub);
+    const inners = withErr.filter((r) => r.err.inner !== null).map((r) => r.err.inner);
     const pubs = (dem ? withErr : rows).filter((r) => r.pub !== null).map((r) => r.pub);
     const sizes = rows.map((r) => r.gz);
     console.log([opt.label, z, rows.length, fmt(sizes.reduce((a, b) => a + b, 0) / 1024, 1),
@@ -287,6 +299,7 @@ for (const z of zooms) {
         withErr.reduce((a, r) => a + r.err.pixels, 0), withErr.reduce((a, r) => a + r.err.uncovered, 0),
         fmt(median(pubs)), fmt(median(ratios), 3), fmt(ratios.length ? Math.max(...ratios) : NaN, 3),
         withErr.length ? Math.round(median(withErr.map((r) => r.tri))) : "-",
-        fmt(median(withErr.map((r) => r.gz)) / 1024, 1)].join("\t"));
+        fmt(median(withErr.map((r) => r.gz)) / 1024, 1),
+        fmt(median(inners)), fmt(inners.length ? Math.max(...inners) : NaN)].join("\t"));
 }
 if (tilesOut) fs.closeSync(tilesOut);
