@@ -4,24 +4,31 @@
 // own data, so that the result never depends on which runs first.
 #include <cstddef>
 #include <future>
-#include <utility>
+#include <system_error>
 
 namespace tb::core {
 
 // Grids of this many samples and more split their work in two (never a 257 x 257 tile).
 inline constexpr std::size_t kTwoThreadSamples = std::size_t{1} << 18;
 
-// Runs first and second: second on a thread of its own when `two`, else after first on this
-// thread. Returns when both have; an exception of either is rethrown (first's first).
+// Runs first and second: second on a thread of its own when `two` (after first on this thread
+// when no thread can be started), else after first. Returns when both have; an exception of
+// either is rethrown (first's first).
 template <typename First, typename Second> void run_both(bool two, First&& first, Second&& second) {
-    if (!two) {
-        first();
-        second();
-        return;
+    std::future<void> other;
+    if (two) {
+        try {
+            other = std::async(std::launch::async, [&second] { second(); });
+        } catch (const std::system_error&) {
+            // No thread to be had: the same work on this one.
+        }
     }
-    auto other = std::async(std::launch::async, std::forward<Second>(second));
     first();
-    other.get();
+    if (other.valid()) {
+        other.get();
+    } else {
+        second();
+    }
 }
 
 } // namespace tb::core
