@@ -74,6 +74,46 @@ private:
 // How many visited rows ahead scan_rows prefetches.
 constexpr std::int64_t kAhead = 2;
 
+// What both scans need of a triangle: its edge functions (the numerators of a's, b's and c's
+// weights, each owning its samples when owns_edge_samples says so), corner heights and 1/area.
+struct TriangleFrame {
+    GridPoint a, b, c;
+    EdgeFn fn[3];
+    double za, zb, zc, inv_area;
+    TriangleFrame(const HeightGrid& grid, GridPoint pa, GridPoint pb, GridPoint pc)
+        : a(pa), b(pb), c(pc),
+          fn{EdgeFn(pb, pc, owns_edge_samples(pb, pc, grid.width, grid.height)),  // weight of a
+             EdgeFn(pc, pa, owns_edge_samples(pc, pa, grid.width, grid.height)),  // weight of b
+             EdgeFn(pa, pb, owns_edge_samples(pa, pb, grid.width, grid.height))}, // weight of c
+          za(grid.at(pa.x, pa.y)), zb(grid.at(pb.x, pb.y)), zc(grid.at(pc.x, pc.y)),
+          inv_area(inverse_area(pa, pb, pc)) {}
+
+    // The mesh height z at sample (x, y) of the closed triangle, from its weights there; false
+    // at a vertex (error 0 by definition, not counted).
+    bool surface(std::int64_t x, std::int64_t y, double wa, double wb, double wc, double& z) const {
+        if (wa > 0 && wb > 0 && wc > 0) {
+            z = interpolate_inside(wa, wb, wc, za, zb, zc, inv_area);
+            return true;
+        }
+        const GridPoint p{static_cast<std::int32_t>(x), static_cast<std::int32_t>(y)};
+        if (p == a || p == b || p == c) {
+            return false;
+        }
+        z = interpolate(a,
+                        za,
+                        b,
+                        zb,
+                        c,
+                        zc,
+                        static_cast<std::int64_t>(wa),
+                        static_cast<std::int64_t>(wb),
+                        static_cast<std::int64_t>(wc),
+                        inv_area,
+                        p);
+        return true;
+    }
+};
+
 // The span of every row is cut by one left and one right edge. A triangle has one long edge
 // from its top to its bottom vertex on one side and two edges meeting at its middle vertex on
 // the other; on a row above (below) the middle vertex only the upper (lower) of the two can
@@ -97,15 +137,10 @@ TriangleStats scan_rows(const HeightGrid& grid,
     // into shifts (1: the split agent's full scans, 2: the merge agent's estimates); 0: any.
     const std::int64_t step = kStep > 0 ? kStep : stride;
     const int w = grid.width;
-    const int h = grid.height;
-    const EdgeFn fn[3] = {EdgeFn(b, c, owns_edge_samples(b, c, w, h)),  // weight of a
-                          EdgeFn(c, a, owns_edge_samples(c, a, w, h)),  // weight of b
-                          EdgeFn(a, b, owns_edge_samples(a, b, w, h))}; // weight of c
+    const TriangleFrame frame(grid, a, b, c);
+    const EdgeFn* fn = frame.fn;
     const GridPoint from[3] = {b, c, a}, to[3] = {c, a, b};
-    const double za = grid.at(a.x, a.y);
-    const double zb = grid.at(b.x, b.y);
-    const double zc = grid.at(c.x, c.y);
-    const double inv_area = inverse_area(a, b, c);
+    const double za = frame.za, zb = frame.zb, zc = frame.zc, inv_area = frame.inv_area;
     // Running stats in locals (registers in the hot loop); finish() packs them.
     std::int64_t samples = 0, error_points = 0, worst_sample = -1;
     double total_error = 0.0, worst_error = 0.0;
@@ -157,32 +192,6 @@ TriangleStats scan_rows(const HeightGrid& grid,
     // middle row itself the upper one excludes at most the middle vertex, never scanned.
     const std::int64_t switch_row =
         pair != nullptr ? ymid + (step - ymid % step) % step : INT64_MAX;
-    // The mesh height z at sample (x, y) of the closed triangle, from its weights there; false
-    // at a vertex (error 0 by definition, not counted). Off the hot path: only span ends and
-    // horizontal edges come here.
-    const auto surface =
-        [&](std::int64_t x, std::int64_t y, double wa, double wb, double wc, double& z) {
-            if (wa > 0 && wb > 0 && wc > 0) {
-                z = interpolate_inside(wa, wb, wc, za, zb, zc, inv_area);
-                return true;
-            }
-            const GridPoint p{static_cast<std::int32_t>(x), static_cast<std::int32_t>(y)};
-            if (p == a || p == b || p == c) {
-                return false;
-            }
-            z = interpolate(a,
-                            za,
-                            b,
-                            zb,
-                            c,
-                            zc,
-                            static_cast<std::int64_t>(wa),
-                            static_cast<std::int64_t>(wb),
-                            static_cast<std::int64_t>(wc),
-                            inv_area,
-                            p);
-            return true;
-        };
     RowBound lb(fn[left[0]], first_row, step), rbd(fn[right[0]], first_row, step);
     for (std::int64_t y = first_row; y <= ymax;
          y += step, lb.next(), rbd.next(), ra += da, rb += db, rc += dc) {
@@ -232,7 +241,8 @@ TriangleStats scan_rows(const HeightGrid& grid,
                 return false;
             }
             double z;
-            if (!surface(x, y, wa, wb, wc, z)) {
+            // Off the hot path: only span ends and horizontal edges come here.
+            if (!frame.surface(x, y, wa, wb, wc, z)) {
                 return false;
             }
             return record(x, z);
@@ -282,14 +292,8 @@ TriangleStats scan_box(const HeightGrid& grid,
                        GridPoint c,
                        std::int64_t stop_at) {
     const int w = grid.width;
-    const int h = grid.height;
-    const EdgeFn fn[3] = {EdgeFn(b, c, owns_edge_samples(b, c, w, h)),  // weight of a
-                          EdgeFn(c, a, owns_edge_samples(c, a, w, h)),  // weight of b
-                          EdgeFn(a, b, owns_edge_samples(a, b, w, h))}; // weight of c
-    const double za = grid.at(a.x, a.y);
-    const double zb = grid.at(b.x, b.y);
-    const double zc = grid.at(c.x, c.y);
-    const double inv_area = inverse_area(a, b, c);
+    const TriangleFrame frame(grid, a, b, c);
+    const EdgeFn* fn = frame.fn;
     std::int64_t samples = 0, error_points = 0, worst_sample = -1;
     double total_error = 0.0, worst_error = 0.0;
     const std::int32_t x0 = std::min({a.x, b.x, c.x}), x1 = std::max({a.x, b.x, c.x});
@@ -304,15 +308,15 @@ TriangleStats scan_box(const HeightGrid& grid,
                 (kMasked && grid.valid[row + static_cast<std::size_t>(x)] == 0)) {
                 continue;
             }
+            // The weights are integers below 2^53: exact as doubles, the same z as scan_rows.
             double z;
-            if (wa > 0 && wb > 0 && wc > 0) {
-                z = interpolate_inside(wa, wb, wc, za, zb, zc, inv_area);
-            } else {
-                const GridPoint p{x, y};
-                if (p == a || p == b || p == c) {
-                    continue;
-                }
-                z = interpolate(a, za, b, zb, c, zc, wa, wb, wc, inv_area, p);
+            if (!frame.surface(x,
+                               y,
+                               static_cast<double>(wa),
+                               static_cast<double>(wb),
+                               static_cast<double>(wc),
+                               z)) {
+                continue;
             }
             const double err =
                 std::abs(z - static_cast<double>(grid.heights[row + static_cast<std::size_t>(x)]));

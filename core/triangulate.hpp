@@ -48,9 +48,9 @@ struct TriangulateOptions {
     // machine), but up to 2 MiB unused at the end of each array. Off for many small meshes at
     // once: the tiler's strips, where it raised the peak memory of `build` by a quarter.
     bool huge_pages = true;
-    // Best by default so that a caller that does not say (the tiler, for now) gets the meshes it
-    // always got, bit for bit; the tiler will choose the level (its config key `effort`, with
-    // Balanced as the product's default) and record it with the tiles it publishes.
+    // Best by default: the paper's full merge for a caller that does not say. The tiler chooses
+    // the level (its config key `effort`, Balanced by default) and records it with the tiles it
+    // publishes.
     Effort effort = Effort::Best;
     // Threads the mesher may use (1 or 2). On a grid of 2^18 samples or more (never a 257 x 257
     // tile) the scan lines' fits, the first error scan and the final error check split their
