@@ -312,6 +312,23 @@ void send_blob(const httplib::Request& req,
     res.set_header("Content-Encoding", coding_name(coding));
 }
 
+// The eps a tile request asks for with ?eps=K: the layer's eps_levels[K], or the zoom's own
+// eps when absent. Every tile route reads it here, so a bad value gets one answer whatever the
+// format; whether the layer has level K, and whether the format takes levels at all, is
+// TileService::tile's to say (400 either way).
+tiler::EpsChoice eps_param(const httplib::Request& req) {
+    tiler::EpsChoice eps;
+    if (req.has_param("eps")) {
+        std::int64_t level = 0;
+        if (!parse_index(req.get_param_value("eps"), 3, level)) {
+            throw InputError("eps must be the index of one of the layer's eps_levels (0, 1, "
+                             "...); see /layers");
+        }
+        eps.level = static_cast<int>(level);
+    }
+    return eps;
+}
+
 // The DEM tile encoding a request asks for with ?encoding= (terrarium when absent).
 tiler::Format dem_encoding(const httplib::Request& req) {
     if (!req.has_param("encoding")) {
@@ -1530,8 +1547,10 @@ struct HttpServer::Impl {
                              std::to_string(tiler::kMaxZoom) + ")");
         }
         const tiler::Format encoding = dem_encoding(req);
-        const auto blob = tiles.tile(
-            req.matches[1].str(), tiler::TileId{static_cast<int>(z), x, y}, encoding, {});
+        const auto blob = tiles.tile(req.matches[1].str(),
+                                     tiler::TileId{static_cast<int>(z), x, y},
+                                     encoding,
+                                     eps_param(req));
         if (busy(blob, res)) {
             return;
         }
@@ -1547,8 +1566,10 @@ struct HttpServer::Impl {
                              std::to_string(tiler::kMaxZoom) + ")");
         }
         const unsigned extensions = accepted_extensions(req.get_header_value("Accept"));
-        const auto blob = tiles.terrain(
-            req.matches[1].str(), tiler::TileId{static_cast<int>(z), x, y}, extensions);
+        const auto blob = tiles.terrain(req.matches[1].str(),
+                                        tiler::TileId{static_cast<int>(z), x, y},
+                                        extensions,
+                                        eps_param(req));
         if (busy(blob, res)) {
             return;
         }
@@ -1570,7 +1591,8 @@ struct HttpServer::Impl {
                              "/terrain/{root}/{level}/{x}/{y}.glb with root 0 or 1, level up to " +
                              std::to_string(tiler::kMaxZoom) + ", and x, y below 2^level");
         }
-        const auto blob = tiles.tile(req.matches[1].str(), id, tiler::Format::Terrain3d, {});
+        const auto blob =
+            tiles.tile(req.matches[1].str(), id, tiler::Format::Terrain3d, eps_param(req));
         if (busy(blob, res)) {
             return;
         }
@@ -1597,15 +1619,7 @@ struct HttpServer::Impl {
         }
         const tiler::Format format =
             req.matches[5].str() == "glb" ? tiler::Format::Glb : tiler::Format::Drc;
-        tiler::EpsChoice eps;
-        if (req.has_param("eps")) {
-            std::int64_t level = 0;
-            if (!parse_index(req.get_param_value("eps"), 3, level)) {
-                throw InputError("eps must be the index of one of the layer's eps_levels (0, 1, "
-                                 "...); see /layers");
-            }
-            eps.level = static_cast<int>(level);
-        }
+        const tiler::EpsChoice eps = eps_param(req);
         const auto blob = tiles.tile(layer, tiler::TileId{static_cast<int>(z), x, y}, format, eps);
         if (busy(blob, res)) {
             return;

@@ -290,15 +290,24 @@ const ServedLayer* TileService::find(const std::string& name) const {
 
 namespace {
 
-// The checks before a mesh tile is looked up: InputError for an unknown eps level or an id
-// outside the layer's scheme, NotFound outside its zooms or data.
-void check_mesh_tile(const tiler::Layer& layer, const tiler::TileId& id, tiler::EpsChoice eps) {
+// An eps level (?eps=K) the layer has, asked of a format made at levels: InputError otherwise,
+// the same for every format when the layer has no level K.
+void check_eps(const tiler::Layer& layer, tiler::Format format, tiler::EpsChoice eps) {
     const int n_levels = static_cast<int>(layer.options().eps_levels.size());
     if (eps.level < -1 || eps.level >= n_levels) {
         throw InputError("eps level " + std::to_string(eps.level) + " is not configured; layer '" +
                          layer.options().name + "' has " + std::to_string(n_levels) +
                          " eps level(s)");
     }
+    if (eps.level >= 0 && format != tiler::Format::Glb && format != tiler::Format::Drc) {
+        throw InputError(std::string("eps levels (?eps=K) apply to .glb and .drc tiles only; .") +
+                         tiler::extension(format) + " tiles are made at their zoom's own eps");
+    }
+}
+
+// The checks before a mesh tile is looked up: InputError for an id outside the layer's scheme,
+// NotFound outside its zooms or data.
+void check_mesh_tile(const tiler::Layer& layer, const tiler::TileId& id) {
     if (!tiler::is_valid(layer.options().scheme, id)) {
         throw InputError("tile " + std::to_string(id.z) + "/" + std::to_string(id.x) + "/" +
                          std::to_string(id.y) + " is outside the " +
@@ -365,13 +374,13 @@ std::shared_ptr<const Blob> TileService::tile(const std::string& layer_name,
         throw NotFound("layer '" + layer_name + "' does not serve ." + tiler::extension(format) +
                        " tiles");
     }
+    check_eps(layer, format, eps);
     if (tiler::is_dem_format(format)) {
-        TB_ASSERT(eps.level == -1); // DEM tiles have no eps
         check_dem_tile(layer, id);
     } else if (tiler::is_terrain_format(format)) {
         check_terrain_tile(layer, id);
     } else {
-        check_mesh_tile(layer, id, eps);
+        check_mesh_tile(layer, id);
     }
 
     Impl& s = *impl_;
@@ -526,9 +535,11 @@ TileService::cached_tile(const std::string& layer, const tiler::TileId& id, tile
     return blob;
 }
 
-std::shared_ptr<const Blob>
-TileService::terrain(const std::string& layer, const tiler::TileId& id, unsigned extensions) {
-    const std::shared_ptr<const Blob> full = tile(layer, id, tiler::Format::Terrain, {});
+std::shared_ptr<const Blob> TileService::terrain(const std::string& layer,
+                                                 const tiler::TileId& id,
+                                                 unsigned extensions,
+                                                 tiler::EpsChoice eps) {
+    const std::shared_ptr<const Blob> full = tile(layer, id, tiler::Format::Terrain, eps);
     if (!full || extensions == tiler::kAllQuantizedMeshExtensions) {
         return full;
     }

@@ -89,7 +89,8 @@ public:
     // The encoded tile, or nullptr when the generation queue or the requests waiting for
     // generations are at their limit (answer 503; decided at once, without waiting). Throws
     // NotFound for an unknown layer, a format the layer does not serve, or a tile with no data;
-    // InputError for an id outside the scheme or an eps level the layer does not have.
+    // InputError for an id outside the scheme, an eps level the layer does not have (the same
+    // message for every format), or an eps level asked of a format other than glb and drc.
     std::shared_ptr<const Blob> tile(const std::string& layer,
                                      const tiler::TileId& id,
                                      tiler::Format format,
@@ -103,9 +104,11 @@ public:
 
     // The layer's quantized-mesh tile with only the extensions in `extensions` (a mask of
     // tiler::QuantizedMeshExtension): the tile with all of them, as tile() gives it, cut down
-    // and cached per mask. nullptr when busy, as tile().
-    std::shared_ptr<const Blob>
-    terrain(const std::string& layer, const tiler::TileId& id, unsigned extensions);
+    // and cached per mask. nullptr when busy, as tile(); `eps` is checked as tile() checks it.
+    std::shared_ptr<const Blob> terrain(const std::string& layer,
+                                        const tiler::TileId& id,
+                                        unsigned extensions,
+                                        tiler::EpsChoice eps = {});
 
     // What terrain() gives when the memory cache holds it (the tile with all extensions and,
     // for fewer, its cut-down copy) and `usable` accepts it, else nullptr. Never generates, cuts
