@@ -17,6 +17,7 @@
 #include <cstdlib>
 
 #include <atomic>
+#include <exception>
 #include <filesystem>
 #include <map>
 #include <set>
@@ -82,6 +83,36 @@ config::Config config_from_dems(const std::vector<std::string>& dems) {
     return cfg;
 }
 
+// A layer's sources for a log line: the first three, and how many more.
+std::string sources_text(const std::vector<std::string>& sources) {
+    std::string text;
+    for (std::size_t i = 0; i < sources.size() && i < 3; ++i) {
+        text += (i ? ", " : "") + sources[i];
+    }
+    if (sources.size() > 3) {
+        text += " and " + std::to_string(sources.size() - 3) + " more";
+    }
+    return text;
+}
+
+// No layer opened: `first` (the first layer's failure) alone for a single layer, as before;
+// for several, one message saying so, of the same kind (exit 2 or 3), with the first reason.
+[[noreturn]] void throw_none_served(std::exception_ptr first, std::size_t layers) {
+    TB_ASSERT(first);
+    if (layers == 1) {
+        std::rethrow_exception(first);
+    }
+    const std::string prefix = "none of the " + std::to_string(layers) +
+                               " layers can be served (each is logged above); the first: ";
+    try {
+        std::rethrow_exception(first);
+    } catch (const IoError& e) {
+        throw IoError(prefix + e.what());
+    } catch (const Error& e) {
+        throw InputError(prefix + e.what());
+    }
+}
+
 // Owns SIGINT and SIGTERM for the whole command: they are blocked in this thread and in every
 // thread started afterwards (HTTP, generation), and one waiter thread takes them with
 // sigtimedwait. While the server starts (opening DEMs can take a while), a signal exits at
@@ -134,9 +165,8 @@ private:
     std::thread waiter_;
 };
 
-int run(const Args& args) {
-    StopSignals signals;
-
+// The config: the file, or one layer per DEM; then the command line's overrides.
+config::Config load_serve_config(const Args& args) {
     config::Config cfg;
     if (args.positional.size() == 1 && ends_with(args.positional[0], ".json")) {
         cfg = config::load_config(args.positional[0]);
@@ -196,13 +226,34 @@ int run(const Args& args) {
         log::set_level(level);
     }
 
-    // Layers and stores; any failure here stops before listening.
-    server::Metrics metrics;
-    std::map<std::string, std::shared_ptr<tiler::TileStore>> stores;
+    return cfg;
+}
+
+struct OpenedLayers {
     std::vector<server::ServedLayer> served;
+    std::vector<server::UnavailableLayer> unavailable;
+};
+
+// The config's layers and their stores. A layer whose sources fail to open is logged and answers
+// 503; any other failure (a store), or every layer failing, stops before listening.
+OpenedLayers open_layers(const config::Config& cfg) {
+    std::map<std::string, std::shared_ptr<tiler::TileStore>> stores;
+    OpenedLayers opened;
+    std::vector<std::string> failures; // logged once the others are known to open
+    std::exception_ptr first_failure;
     for (const auto& layer : cfg.layers) {
         server::ServedLayer s;
-        s.layer = tiler::Layer::open(layer.options);
+        try {
+            s.layer = tiler::Layer::open(layer.options);
+        } catch (const Error& e) {
+            failures.push_back("layer " + layer.options.name + " (" +
+                               sources_text(layer.options.sources) + "): " + e.what());
+            opened.unavailable.push_back({layer.options.name, e.what()});
+            if (!first_failure) {
+                first_failure = std::current_exception();
+            }
+            continue;
+        }
         s.formats = layer.formats;
         if (layer.store) {
             auto& store = stores[*layer.store];
@@ -216,15 +267,35 @@ int run(const Args& args) {
         }
         log::info("layer " + layer.options.name + ": zooms " + std::to_string(s.layer->min_zoom()) +
                   ".." + std::to_string(s.layer->max_zoom()));
-        served.push_back(std::move(s));
+        opened.served.push_back(std::move(s));
     }
+    if (opened.served.empty()) {
+        for (const auto& failure : failures) {
+            if (cfg.layers.size() > 1) {
+                log::error(failure);
+            }
+        }
+        throw_none_served(first_failure, cfg.layers.size());
+    }
+    for (const auto& failure : failures) {
+        log::error(failure + "; its routes answer 503, the other layers serve");
+    }
+    return opened;
+}
+
+int run(const Args& args) {
+    StopSignals signals;
+    const config::Config cfg = load_serve_config(args);
+    server::Metrics metrics;
+    OpenedLayers opened = open_layers(cfg);
     const int threads = cfg.server.threads > 0 ? cfg.server.threads : tiler::usable_cpus();
 
     server::TileServiceOptions tile_options;
     tile_options.cache_bytes = cfg.server.cache_mb << 20;
     tile_options.threads = threads;
     tile_options.queue_limit = cfg.server.queue_limit;
-    server::TileService tiles(std::move(served), tile_options, metrics);
+    server::TileService tiles(
+        std::move(opened.served), tile_options, metrics, std::move(opened.unavailable));
 
     server::HttpOptions http_options;
     http_options.host = cfg.server.host;
@@ -248,7 +319,11 @@ int run(const Args& args) {
 
     const std::string shown_host = cfg.server.host == "0.0.0.0" ? "localhost" : cfg.server.host;
     log::info("serving http://" + shown_host + ":" + std::to_string(port) + "/ (" +
-              std::to_string(tiles.layers().size()) + " layer(s), " + std::to_string(threads) +
+              std::to_string(tiles.layers().size()) + " layer(s)" +
+              (tiles.unavailable().empty()
+                   ? std::string()
+                   : ", " + std::to_string(tiles.unavailable().size()) + " unavailable") +
+              ", " + std::to_string(threads) +
               " generation thread(s)); open it in a browser, stop with Ctrl-C");
     http.run();
 

@@ -1230,6 +1230,14 @@ struct HttpServer::Impl {
             out << dem_json(served) << "}";
             first = false;
         }
+        // Layers that failed to open at startup: their routes answer 503 with this reason.
+        out << "],\"unavailable\":[";
+        first = true;
+        for (const auto& u : tiles.unavailable()) {
+            out << (first ? "" : ",") << "{\"name\":\"" << json_escape(u.name) << "\",\"error\":\""
+                << json_escape(u.reason) << "\"}";
+            first = false;
+        }
         out << "]}\n";
         return out.str();
     }
@@ -1277,10 +1285,7 @@ struct HttpServer::Impl {
 
     // The layer, which must serve `format` (NotFound otherwise).
     const ServedLayer& serving(const std::string& name, tiler::Format format) const {
-        const ServedLayer* served = tiles.find(name);
-        if (!served) {
-            throw NotFound("unknown layer '" + name + "'");
-        }
+        const ServedLayer* served = &tiles.require(name);
         if (std::find(served->formats.begin(), served->formats.end(), format) ==
             served->formats.end()) {
             throw NotFound("layer '" + name + "' does not serve " + tiler::format_name(format) +
@@ -1316,6 +1321,11 @@ struct HttpServer::Impl {
                 out << "<a href=\"" << tile << "\">" << tile << "</a>";
             }
             out << "</td></tr>\n";
+        }
+        for (const auto& u : tiles.unavailable()) {
+            out << "<tr><td>" << html_escape(u.name)
+                << "</td><td colspan=\"3\">unavailable: " << html_escape(u.reason)
+                << "</td></tr>\n";
         }
         out << "</table>\n</body></html>\n";
         return out.str();
@@ -1356,6 +1366,8 @@ struct HttpServer::Impl {
                     send_error(res, 400, e.what());
                 } catch (const NotFound& e) {
                     send_error(res, 404, e.what());
+                } catch (const Unavailable& e) {
+                    send_error(res, 503, e.what()); // logged once, when it failed to open
                 } catch (const std::exception& e) {
                     log::error(loggable(req) + ": " + e.what());
                     send_error(res, 500, "internal error; see the server log");
@@ -1456,6 +1468,11 @@ struct HttpServer::Impl {
                 text += "tb_tiles_over_eps{layer=\"" + served.layer->options().name + "\"} " +
                         std::to_string(served.layer->tiles_over_eps()) + "\n";
             }
+            text += "# HELP tb_layers_unavailable Configured layers that failed to open at "
+                    "startup (their routes answer 503).\n"
+                    "# TYPE tb_layers_unavailable gauge\n"
+                    "tb_layers_unavailable " +
+                    std::to_string(tiles.unavailable().size()) + "\n";
             res.set_content(text, "text/plain; version=0.0.4; charset=utf-8");
         });
 

@@ -251,8 +251,9 @@ struct TileService::Impl {
 
 TileService::TileService(std::vector<ServedLayer> layers,
                          const TileServiceOptions& options,
-                         Metrics& metrics)
-    : layers_(std::move(layers)) {
+                         Metrics& metrics,
+                         std::vector<UnavailableLayer> unavailable)
+    : layers_(std::move(layers)), unavailable_(std::move(unavailable)) {
     TB_ASSERT(options.threads >= 1 && options.queue_limit >= 0 && options.max_waiting >= 0);
     TileServiceOptions resolved = options;
     if (resolved.max_waiting == 0) {
@@ -286,6 +287,18 @@ const ServedLayer* TileService::find(const std::string& name) const {
         }
     }
     return nullptr;
+}
+
+const ServedLayer& TileService::require(const std::string& name) const {
+    if (const ServedLayer* served = find(name)) {
+        return *served;
+    }
+    for (const auto& u : unavailable_) {
+        if (u.name == name) {
+            throw Unavailable("layer '" + name + "' is unavailable: " + u.reason);
+        }
+    }
+    throw NotFound("unknown layer '" + name + "'");
 }
 
 namespace {
@@ -361,10 +374,7 @@ std::shared_ptr<const Blob> TileService::tile(const std::string& layer_name,
                                               const tiler::TileId& id,
                                               tiler::Format format,
                                               tiler::EpsChoice eps) {
-    const ServedLayer* served = find(layer_name);
-    if (!served) {
-        throw NotFound("unknown layer '" + layer_name + "'");
-    }
+    const ServedLayer* served = &require(layer_name);
     const tiler::Layer& layer = *served->layer;
     bool format_served = false;
     for (auto f : served->formats) {
@@ -575,10 +585,7 @@ TileService::cached_terrain(const std::string& layer,
 
 std::shared_ptr<const Blob> TileService::document(const std::string& layer_name,
                                                   const std::string& path) {
-    const ServedLayer* served = find(layer_name);
-    if (!served) {
-        throw NotFound("unknown layer '" + layer_name + "'");
-    }
+    const ServedLayer* served = &require(layer_name);
     if (path == "layer.json" &&
         std::find(served->formats.begin(), served->formats.end(), tiler::Format::Terrain) ==
             served->formats.end()) {

@@ -6,6 +6,7 @@
 // wait for one make_tile call. A generated tile is written to the store (atomically, by
 // TileStore::put) and inserted in the LRU. Tiles with no data are remembered in the LRU too, so
 // repeated requests outside the data stay cheap.
+#include "core/error.hpp"
 #include "server/encoding.hpp"
 #include "server/metrics.hpp"
 #include "tiler/formats/format.hpp"
@@ -28,6 +29,18 @@ struct ServedLayer {
     std::shared_ptr<tiler::TileStore> store; // may be null; may be shared between layers
     // Whether tiles at eps levels (EpsChoice::level >= 0) go to the store too (StoreUse).
     bool store_eps_levels = true;
+};
+
+// A configured layer that could not be opened at startup (its DEM is unreadable, damaged, ...):
+// the other layers serve, and its routes answer 503 with `reason`.
+struct UnavailableLayer {
+    std::string name;
+    std::string reason; // the error that stopped it, naming the file
+};
+
+// A request for an UnavailableLayer: HTTP 503 with the message.
+struct Unavailable : Error {
+    using Error::Error;
 };
 
 struct TileServiceOptions {
@@ -71,13 +84,18 @@ class TileService {
 public:
     TileService(std::vector<ServedLayer> layers,
                 const TileServiceOptions& options,
-                Metrics& metrics);
+                Metrics& metrics,
+                std::vector<UnavailableLayer> unavailable = {});
     ~TileService(); // finishes queued generations, then joins the pool
     TileService(const TileService&) = delete;
     TileService& operator=(const TileService&) = delete;
 
     const std::vector<ServedLayer>& layers() const { return layers_; }
     const ServedLayer* find(const std::string& name) const; // nullptr when unknown
+    const std::vector<UnavailableLayer>& unavailable() const { return unavailable_; }
+    // The layer named `name`: throws Unavailable for an unavailable one (with its reason),
+    // NotFound for a name no layer has.
+    const ServedLayer& require(const std::string& name) const;
     // Requests that may wait for generations at once (TileServiceOptions::max_waiting, resolved).
     int max_waiting() const;
 
@@ -120,12 +138,14 @@ public:
                                                const std::function<bool(const Blob&)>& usable);
 
     // A tileset document of the layer ("tileset.json", "subtrees/0/0/0.subtree", ...). Throws
-    // NotFound for an unknown layer or a path the layer has no document for.
+    // NotFound for an unknown layer or a path the layer has no document for. tile(), terrain()
+    // and document() throw Unavailable for an unavailable layer.
     std::shared_ptr<const Blob> document(const std::string& layer, const std::string& path);
 
 private:
     struct Impl;
     std::vector<ServedLayer> layers_;
+    std::vector<UnavailableLayer> unavailable_;
     std::unique_ptr<Impl> impl_;
 };
 
