@@ -185,15 +185,47 @@ std::string resolve(const fs::path& base_dir, const std::string& path) {
     return p.lexically_normal().string();
 }
 
+// server/cors_origins: "*" or http(s) origins.
+void parse_cors_origins(Checker& check,
+                        const json& origins,
+                        const std::string& at,
+                        ServerConfig& out) {
+    if (!check.array(origins, at)) {
+        return;
+    }
+    out.cors_origins.clear();
+    for (std::size_t i = 0; i < origins.size(); ++i) {
+        const std::string pi = at + "/" + std::to_string(i);
+        auto s = check.string(origins[i], pi);
+        if (!s) {
+            continue;
+        }
+        const bool ok = *s == "*" || s->rfind("http://", 0) == 0 || s->rfind("https://", 0) == 0;
+        if (!ok || s->find_first_of(" \r\n\t,") != std::string::npos) {
+            check.error(pi,
+                        "expected \"*\" or an origin like \"https://example.com\", got " +
+                            show(origins[i]));
+            continue;
+        }
+        out.cors_origins.push_back(*s);
+    }
+}
+
 void parse_server(Checker& check, const json& value, ServerConfig& out) {
     const std::string at = "/server";
     if (!check.object(value, at)) {
         return;
     }
-    check.known_keys(
-        value,
-        at,
-        {"host", "port", "threads", "cache_mb", "cors_origins", "log_level", "queue_limit"});
+    check.known_keys(value,
+                     at,
+                     {"host",
+                      "port",
+                      "threads",
+                      "cache_mb",
+                      "cors_origins",
+                      "log_level",
+                      "queue_limit",
+                      "metrics"});
     if (value.contains("host")) {
         if (auto s = check.string(value["host"], at + "/host")) {
             if (const auto problem = host_problem(*s)) {
@@ -229,28 +261,13 @@ void parse_server(Checker& check, const json& value, ServerConfig& out) {
             out.log_level = *s;
         }
     }
-    if (value.contains("cors_origins")) {
-        const json& origins = value["cors_origins"];
-        const std::string p = at + "/cors_origins";
-        if (check.array(origins, p)) {
-            out.cors_origins.clear();
-            for (std::size_t i = 0; i < origins.size(); ++i) {
-                const std::string pi = p + "/" + std::to_string(i);
-                auto s = check.string(origins[i], pi);
-                if (!s) {
-                    continue;
-                }
-                const bool ok =
-                    *s == "*" || s->rfind("http://", 0) == 0 || s->rfind("https://", 0) == 0;
-                if (!ok || s->find_first_of(" \r\n\t,") != std::string::npos) {
-                    check.error(pi,
-                                "expected \"*\" or an origin like \"https://example.com\", got " +
-                                    show(origins[i]));
-                    continue;
-                }
-                out.cors_origins.push_back(*s);
-            }
+    if (value.contains("metrics")) {
+        if (auto s = check.one_of(value["metrics"], at + "/metrics", {"loopback", "on", "off"})) {
+            out.metrics = *s;
         }
+    }
+    if (value.contains("cors_origins")) {
+        parse_cors_origins(check, value["cors_origins"], at + "/cors_origins", out);
     }
 }
 

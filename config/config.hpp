@@ -22,7 +22,8 @@ struct ServerConfig {
     std::size_t cache_mb = 256;                    // in-memory tile cache, MiB (0 disables it)
     std::vector<std::string> cors_origins = {"*"}; // Access-Control-Allow-Origin values
     std::string log_level = "info";                // debug | info | warn | error | off
-    int queue_limit = 64; // generations allowed to wait for a thread; past it: 503
+    int queue_limit = 64;             // generations allowed to wait for a thread; past it: 503
+    std::string metrics = "loopback"; // who may read /metrics: loopback | on | off
 };
 
 struct LayerConfig {

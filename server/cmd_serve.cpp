@@ -204,6 +204,10 @@ config::Config load_serve_config(const Args& args) {
         }
         cfg.server.threads = static_cast<int>(threads);
     }
+    if (auto metrics = args.get("metrics")) {
+        server::parse_metrics_access(*metrics, "--metrics"); // checked here, before the layers
+        cfg.server.metrics = *metrics;
+    }
     if (auto store = args.get("store")) {
         for (auto& layer : cfg.layers) {
             layer.store = *store;
@@ -302,6 +306,7 @@ int run(const Args& args) {
     http_options.port = cfg.server.port;
     http_options.cors_origins = cfg.server.cors_origins;
     http_options.http_threads = std::max(16, 4 * threads);
+    http_options.metrics = server::parse_metrics_access(cfg.server.metrics, "metrics");
     http_options.web_root = find_web_root(args);
     if (!http_options.web_root.empty()) {
         for (const auto& layer : tiles.layers()) {
@@ -337,12 +342,16 @@ int run(const Args& args) {
 const Command& serve_command() {
     static const Command command{
         {"serve",
-         "[CONFIG.json | DEM...] [--host H] [--port P] [--threads N] [--store PATH]",
+         "[CONFIG.json | DEM...] [--host H] [--port P] [--threads N] [--store PATH] "
+         "[--metrics loopback|on|off]",
          "Serve terrain tiles over HTTP.",
          {{"host", "HOST", "address to listen on (default 127.0.0.1, or the config's)"},
           {"port", "PORT", "port to listen on (default 8080; 0 picks a free port)"},
           {"threads", "N", "tile generation threads (default: one per usable core)"},
           {"web", "DIR", "the viewer's directory (default: web/ of this checkout; 'none': off)"},
+          {"metrics",
+           "WHO",
+           "who may read /metrics: loopback (default: this machine only), on (anyone), off"},
           {"nodata", "V", "raw sample value every layer treats as nodata (the config's nodata)"},
           {"effort",
            "LEVEL",

@@ -62,6 +62,8 @@ thread_local std::string t_accept_encoding;
 // handler set, so a client got a 200 with part of a tile. apply_range answers it instead, after
 // routing, for complete 200 answers only.
 thread_local std::string t_range;
+// The address of the request's peer, for /metrics' loopback check.
+thread_local std::string t_peer_ip;
 
 std::string json_escape(std::string_view text) {
     std::string out;
@@ -121,6 +123,8 @@ const char* reason(int status) {
     switch (status) {
     case 400:
         return "bad request";
+    case 403:
+        return "forbidden";
     case 404:
         return "not found; see / for the layers and their URLs";
     case 405:
@@ -161,7 +165,22 @@ std::string loggable(const httplib::Request& req) {
     return text;
 }
 
-// A decimal digit string of at most `max_digits` digits, as a number.
+// True when `ip` (as inet_ntop writes it) is this machine's loopback: 127.0.0.0/8, ::1, or an
+// IPv4-mapped 127 address.
+bool is_loopback(std::string_view ip) {
+    if (ip.rfind("::ffff:", 0) == 0) {
+        ip.remove_prefix(7);
+    }
+    return ip == "::1" || ip.rfind("127.", 0) == 0;
+}
+
+// True when the request comes from this machine itself: a loopback peer that is not a reverse
+// proxy forwarding someone else's request (it would name the client in one of these headers).
+bool from_this_machine(const httplib::Request& req) {
+    return is_loopback(t_peer_ip) && !req.has_header("Forwarded") &&
+           !req.has_header("X-Forwarded-For") && !req.has_header("X-Real-IP");
+}
+
 // A non-empty comma-separated list of HTTP tokens (header names), optional spaces around commas.
 bool is_token_list(std::string_view text) {
     const auto tchar = [](char c) {
@@ -184,6 +203,7 @@ bool is_token_list(std::string_view text) {
     return any && (in_token || after_token);
 }
 
+// A decimal digit string of at most `max_digits` digits, as a number.
 bool parse_index(std::string_view text, std::size_t max_digits, std::int64_t& out) {
     if (text.empty() || text.size() > max_digits) {
         return false;
@@ -923,6 +943,7 @@ struct HttpServer::Impl {
         if (take_range(request, t_range, without_range)) {
             request = without_range;
         }
+        t_peer_ip = peer.ip;
         MemoryStream strm(request, peer, reply.bytes);
         bool closed = false;
         bool ok = false;
@@ -1457,8 +1478,19 @@ struct HttpServer::Impl {
             res.set_content("{\"status\":\"ok\"}\n", "application/json");
         });
 
-        server.Get("/metrics", [this](const httplib::Request&, httplib::Response& res) {
+        server.Get("/metrics", [this](const httplib::Request& req, httplib::Response& res) {
             t_request.route = "metrics";
+            if (options.metrics == MetricsAccess::Off) {
+                throw NotFound("/metrics is off on this server (\"metrics\" in the config's "
+                               "server section, or --metrics)");
+            }
+            if (options.metrics == MetricsAccess::Loopback && !from_this_machine(req)) {
+                send_error(res,
+                           403,
+                           "/metrics answers this machine only (127.0.0.1 or ::1, not through a "
+                           "proxy); \"metrics\": \"on\" in the config, or --metrics on, opens it");
+                return;
+            }
             res.set_header("Cache-Control", kNoStore);
             std::string text = metrics.render();
             text += "# HELP tb_tiles_over_eps Tiles made whose error measured at the source's "
@@ -1647,6 +1679,19 @@ struct HttpServer::Impl {
         send_blob(req, res, *blob, tiler::media_type(format), kTileCacheControl);
     }
 };
+
+MetricsAccess parse_metrics_access(const std::string& text, const std::string& what) {
+    if (text == "loopback") {
+        return MetricsAccess::Loopback;
+    }
+    if (text == "on") {
+        return MetricsAccess::On;
+    }
+    if (text == "off") {
+        return MetricsAccess::Off;
+    }
+    throw InputError(what + ": expected loopback, on or off, got '" + text.substr(0, 40) + "'");
+}
 
 HttpServer::HttpServer(TileService& tiles, Metrics& metrics, const HttpOptions& options)
     : impl_(std::make_unique<Impl>(tiles, metrics, options)) {}

@@ -4,7 +4,7 @@
 //   GET /web/{path}                     the viewer's files under web_root (CesiumJS, three.js)
 //   GET /layers                         the layers as JSON
 //   GET /health                         {"status":"ok"}
-//   GET /metrics                        Prometheus text
+//   GET /metrics                        Prometheus text (HttpOptions::metrics says to whom)
 //   GET /{layer}/{z}/{x}/{y}.{glb|drc}  a tile; ?eps=K picks the layer's eps_levels[K]
 //   GET /{layer}/{document path}        tileset.json, subtrees, ... (whatever the layer has)
 // HEAD works wherever GET does; OPTIONS answers CORS preflights.
@@ -18,6 +18,16 @@
 
 namespace tb::server {
 
+// Who may read GET /metrics.
+enum class MetricsAccess {
+    Loopback, // requests from this machine only (127.0.0.0/8, ::1, no proxy headers); 403 else
+    On,       // anyone who reaches the port
+    Off,      // nobody: 404
+};
+
+// "loopback", "on" or "off" as a MetricsAccess; InputError naming `what` otherwise.
+MetricsAccess parse_metrics_access(const std::string& text, const std::string& what);
+
 struct HttpOptions {
     std::string host = "127.0.0.1";
     int port = 8080; // 0: any free port (see bind())
@@ -27,7 +37,8 @@ struct HttpOptions {
     // generation (TileService::max_waiting), so those can never take all of it. Connections
     // themselves hold no thread (server/connections.hpp).
     int http_threads = 16;
-    std::string web_root;    // the viewer's directory (index.html, node_modules/); empty: none
+    std::string web_root; // the viewer's directory (index.html, node_modules/); empty: none
+    MetricsAccess metrics = MetricsAccess::Loopback;
     ConnectionLimits limits; // timeouts and sizes; max_connections is also capped by the fd limit
 };
 

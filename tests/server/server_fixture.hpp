@@ -18,8 +18,8 @@
 #include <unistd.h>
 
 #include <atomic>
-#include <chrono>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -208,8 +208,7 @@ struct RunningServer {
                   server::TileServiceOptions tile_options = {},
                   server::HttpOptions http_options = {}) {
         tiles = std::make_unique<server::TileService>(std::move(layers), tile_options, metrics);
-        http_options.host = "127.0.0.1";
-        http_options.port = 0;
+        http_options.port = 0; // the host is HttpOptions' default, 127.0.0.1, unless given
         http = std::make_unique<server::HttpServer>(*tiles, metrics, http_options);
         port = http->bind();
         thread = std::thread([this] { http->run(); });
