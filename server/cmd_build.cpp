@@ -244,7 +244,10 @@ const Command& build_command() {
          "flight and exits with 130/143; a second one stops at once. Without --resume or\n"
          "--force an existing layer in OUT is an error. Sharded builds: run every shard I/N\n"
          "against the same OUT (a shared directory, or one SQLite file on one machine), then\n"
-         "once 'terrabound build ... --finalize' with the same parameters."},
+         "once 'terrabound build ... --finalize' with the same parameters. One build writes OUT\n"
+         "at a time (the shards of one build together): another is refused at once, naming the\n"
+         "holder's pid and host. The lock is OUT/.build.lock (OUT.sqlite.build.lock beside an\n"
+         "SQLite file), gone once the build ends; a killed build's lock is taken over."},
         run};
     return command;
 }

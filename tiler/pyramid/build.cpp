@@ -13,6 +13,7 @@
 #include "tiler/json_number.hpp"
 #include "tiler/log.hpp"
 #include "tiler/pyramid/tile_settings.hpp"
+#include "tiler/stores/output_lock.hpp"
 #include "tiler/stores/store.hpp"
 
 #include <algorithm>
@@ -613,6 +614,70 @@ void check_options(const BuildOptions& o) {
     }
 }
 
+// Checks the output against this run (--force: clears the layer) and writes the build manifest
+// when there is none yet. Returns the shard count (--finalize learns it from the manifest).
+// Runs inside the output lock's setup, so that shards starting together agree on one manifest.
+int prepare_output(const BuildOptions& o,
+                   const Layer& layer,
+                   TileStore& store,
+                   const std::string& where) {
+    const std::string& name = o.layer.name;
+    const auto existing = store.get_document(name, kBuildManifest);
+    int shard_count = o.shard ? o.shard->count : 1;
+    if (o.finalize && existing) {
+        // --finalize learns N from the shards' manifest.
+        const std::string n = manifest_value(parse_manifest(*existing), "shard_count");
+        const auto r = std::from_chars(n.data(), n.data() + n.size(), shard_count);
+        if (r.ec != std::errc() || shard_count < 1) {
+            throw IoError(where + ": " + std::string(kBuildManifest) +
+                          " has no valid shard_count; "
+                          "it was not written by this terrabound; use --force to start over");
+        }
+    }
+    const Manifest manifest = make_manifest(o, layer, shard_count);
+    if (o.force) {
+        if (store.has_layer(name)) {
+            log::info("build: --force: removing layer " + name + " from " + store.describe());
+            store.remove_layer(name);
+        }
+    } else if (o.resume || o.shard || o.finalize) {
+        if (existing) {
+            const Manifest was = parse_manifest(*existing);
+            compare_manifests(was, manifest, o.shard || o.finalize, where);
+        } else if (store.has_layer(name)) {
+            throw InputError(where + ": holds files but no " + std::string(kBuildManifest) +
+                             ", so it was not made by terrabound build; use --force to overwrite "
+                             "or choose another output");
+        } else if (o.finalize) {
+            throw InputError(where + ": nothing to finalize (no " + std::string(kBuildManifest) +
+                             "); run the shards first");
+        }
+    } else if (store.has_layer(name)) {
+        throw InputError(o.output + " exists (layer " + name +
+                         "); use --resume to continue or --force to overwrite");
+    }
+    if (!existing || o.force) {
+        store.put_document(name, kBuildManifest, manifest_text(manifest));
+    }
+    return shard_count;
+}
+
+// This run as the lock file shows it to a refused one.
+std::string lock_command(const BuildOptions& o) {
+    std::string command = "terrabound build";
+    if (o.shard) {
+        command +=
+            " --shard " + std::to_string(o.shard->index) + "/" + std::to_string(o.shard->count);
+    } else if (o.force) {
+        command += " --force";
+    } else if (o.finalize) {
+        command += " --finalize";
+    } else if (o.resume) {
+        command += " --resume";
+    }
+    return command + " -o " + o.output;
+}
+
 } // namespace
 
 ShardSpec parse_shard(std::string_view text) {
@@ -683,6 +748,10 @@ std::string to_json(const BuildSummary& s) {
 BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop) {
     const auto start = Clock::now();
     check_options(o);
+    // One writer per output (tiler/stores/output_lock.hpp): taken before anything reads or
+    // writes the output and held until this returns. Only the shards of one build share it.
+    OutputLock output_lock(
+        o.output, o.shard ? LockMode::Shared : LockMode::Exclusive, lock_command(o));
     // The workers make tiles side by side, so each meshes its tile on its own thread: --threads
     // N then uses N cores.
     LayerOptions layer_options = o.layer;
@@ -692,43 +761,8 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
     auto store = TileStore::open(o.output);
     const std::string where = o.output + " (layer " + name + ")";
 
-    const auto existing = store->get_document(name, kBuildManifest);
-    int shard_count = o.shard ? o.shard->count : 1;
-    if (o.finalize && existing) {
-        // --finalize learns N from the shards' manifest.
-        const std::string n = manifest_value(parse_manifest(*existing), "shard_count");
-        const auto r = std::from_chars(n.data(), n.data() + n.size(), shard_count);
-        if (r.ec != std::errc() || shard_count < 1) {
-            throw IoError(where + ": " + std::string(kBuildManifest) +
-                          " has no valid shard_count; "
-                          "it was not written by this terrabound; use --force to start over");
-        }
-    }
-    const Manifest manifest = make_manifest(o, *layer, shard_count);
-    if (o.force) {
-        if (store->has_layer(name)) {
-            log::info("build: --force: removing layer " + name + " from " + store->describe());
-            store->remove_layer(name);
-        }
-    } else if (o.resume || o.shard || o.finalize) {
-        if (existing) {
-            const Manifest was = parse_manifest(*existing);
-            compare_manifests(was, manifest, o.shard || o.finalize, where);
-        } else if (store->has_layer(name)) {
-            throw InputError(where + ": holds files but no " + std::string(kBuildManifest) +
-                             ", so it was not made by terrabound build; use --force to overwrite "
-                             "or choose another output");
-        } else if (o.finalize) {
-            throw InputError(where + ": nothing to finalize (no " + std::string(kBuildManifest) +
-                             "); run the shards first");
-        }
-    } else if (store->has_layer(name)) {
-        throw InputError(o.output + " exists (layer " + name +
-                         "); use --resume to continue or --force to overwrite");
-    }
-    if (!existing || o.force) {
-        store->put_document(name, kBuildManifest, manifest_text(manifest));
-    }
+    int shard_count = 1;
+    output_lock.setup([&] { shard_count = prepare_output(o, *layer, *store, where); });
 
     const Plan plan = make_plan(*layer, o);
     // The 3D Tiles tileset lists glb (or drc) tiles; terrain tiles have their layer.json.

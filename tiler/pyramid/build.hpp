@@ -3,6 +3,9 @@
 // made by N worker threads and written to a TileStore by one writer, resumable and shardable.
 //
 // Order of events, which is what makes a build safe to kill at any moment:
+//   0. the lock on the output (tiler/stores/output_lock.hpp), held until build_pyramid returns:
+//      Exclusive for an unsharded run, Shared by the shards of one build, so no two builds mix
+//      their tiles in one output;
 //   1. the manifest document "build-manifest.json" (everything that decides the tiles' bytes);
 //   2. tiles, each write atomic (directory: temp + fsync + rename; SQLite: batched transactions);
 //   3. unsharded: the layer's tileset documents, "tileset.json" last, so a tileset never points
@@ -80,7 +83,8 @@ std::string to_json(const BuildSummary& summary);
 // Runs a build. `stop` is polled: once it is true no new tile is started, tiles in flight are
 // finished and written, and the summary comes back with interrupted = true. Throws InputError
 // for bad options or a manifest mismatch, IoError when the store fails (the build stops at
-// once; everything written before stays valid for --resume).
+// once; everything written before stays valid for --resume), and IoError at once, before
+// touching the output, when another build holds it (the message names its pid and host).
 BuildSummary build_pyramid(const BuildOptions& options, const std::atomic<bool>& stop);
 
 } // namespace tb::tiler
