@@ -14,6 +14,7 @@
 #include "tiler/sources/gdal_source.hpp"
 #include "tiler/sources/geoid.hpp"
 #include "tiler/summary/dem_summary.hpp"
+#include "tiler/summary/summary_file.hpp"
 #include "tiler/summary/summary_tile.hpp"
 
 #include <unistd.h>
@@ -49,8 +50,16 @@ constexpr double kMinEps = 0.001;
 // CesiumJS's geometric error of a geodetic terrain level at zoom 0, metres: the equator's
 // length / 4 over a 65-sample tile, two tiles across (getLevelMaximumGeometricError).
 constexpr double kCesiumLevelError = 6378137.0 * 2 * 3.14159265358979323846 * 0.25 / (65 * 2);
+// The share of a zoom's reach (zoom_reach: how far its rough cells stray from flat) it is meshed
+// at, at least. Below it the mesher spends triangles on the lattice's planes to within an eps the
+// published bound cannot show, since the cells' own ranges dominate it: on N44W072 (SRTM 3")
+// the median glb tile of z7/z8/z9 falls from 13.8k/13.5k/37.6k triangles at the ladder to
+// 4.3k/4.5k/13.5k, and the median published bound rises from 215/94/41 m to 366/166/55 m.
+constexpr double kReachShare = 0.25;
 // The share of it globe terrain is meshed at, at least (see terrain_eps_for_zoom).
 constexpr double kTerrainLevelShare = 0.25;
+// The largest share of eps globe terrain keeps for sag (terrain_budget_at).
+constexpr double kTerrainSagMost = 0.75;
 // 3D Tiles terrain tiles wider than this (zoom 6 and coarser) carry float32 positions: the
 // 16-bit box is level at the tile's centre, and far from it a step of the box moves a vertex's
 // height (4.7 m a step at zoom 6, hundreds of metres on a hemisphere at zoom 0).
@@ -96,8 +105,14 @@ public:
     const LayerOptions& options() const override { return options_; }
     int min_zoom() const override { return min_zoom_; }
     int max_zoom() const override { return max_zoom_; }
+    // The ladder, finest_eps * 2^(max_zoom - z), raised where the summary shows a zoom's cells
+    // to be rougher than that (reach_share_of).
     double eps_for_zoom(int z) const override {
-        return finest_eps_ * std::ldexp(1.0, max_zoom_ - z);
+        const double ladder = finest_eps_ * std::ldexp(1.0, max_zoom_ - z);
+        if (!summary_ok_ || z < 0 || z >= max_zoom_ || zoom_source(z) == ZoomSource::Pixels) {
+            return ladder;
+        }
+        return std::max(ladder, kReachShare * reach()[static_cast<std::size_t>(z)]);
     }
     LonLatBox data_bounds() const override { return footprint_; }
     TileRange tiles_at(int z) const override {
@@ -307,10 +322,44 @@ public:
     TileRaster summary_raster(const TileId& id) const;
     TileRaster raster_from(const TileId& id, const LatticeBlock& block) const;
 
+    // zoom_reach of every zoom 0..max_zoom - 1 (0 where a zoom reads pixels), made no smaller
+    // toward coarser zooms, so that eps never shrinks from one zoom to the next coarser one.
+    const std::vector<double>& reach() const {
+        std::call_once(reach_once_, [this] {
+            reach_.assign(static_cast<std::size_t>(max_zoom_) + 1, 0.0);
+            for (int z = max_zoom_ - 1; z >= 0; --z) {
+                const auto k = static_cast<std::size_t>(z);
+                if (zoom_source(z) != ZoomSource::Pixels) {
+                    reach_[k] =
+                        zoom_reach(summary(), *pixels_, options_.scheme, z, options_.tile_size);
+                }
+                reach_[k] = std::max(reach_[k], reach_[k + 1]);
+            }
+        });
+        return reach_;
+    }
+
+    // The summary kept on disk for this source and these settings, else made (and kept).
+    DemSummary load_or_make_summary() const {
+        const auto dir =
+            summary_dir_for(options_.summary_dir, std::int64_t{pixels_->width} * pixels_->height);
+        const auto key =
+            dir ? summary_key(options_.sources, options_.nodata, datum_, *pixels_) : std::nullopt;
+        if (!key) {
+            return DemSummary::build(*source_, *pixels_, datum_);
+        }
+        const auto path = summary_path(*dir, options_.sources.front(), *key);
+        if (auto kept = load_summary(path, *key)) {
+            return std::move(*kept);
+        }
+        DemSummary made = DemSummary::build(*source_, *pixels_, datum_);
+        save_summary(path, *key, made);
+        return made;
+    }
+
     // The source's summary, made on first use (once, whichever thread asks first).
     const DemSummary& summary() const {
-        std::call_once(summary_once_,
-                       [this] { summary_.emplace(DemSummary::build(*source_, *pixels_, datum_)); });
+        std::call_once(summary_once_, [this] { summary_.emplace(load_or_make_summary()); });
         return *summary_;
     }
 
@@ -1088,8 +1137,13 @@ private:
     ErrorBudget budget_at(int z, double eps) const { return budget_with(z, eps, kSagShare); }
     // The same for globe terrain (quantized-mesh and 3D Tiles terrain), which keeps its own
     // share for sag (kTerrainSagShare).
+    // Where eps is far above the DEM's relief (coarse zooms, whose eps follows CesiumJS's level
+    // error), the mesher needs little of it: its share for sag grows up to kTerrainSagMost while
+    // the mesher keeps the relief plus an eighth, and the longer edges that allows follow the
+    // Earth's curve with fewer triangles (zoom 0 of N44W072: 14.7k triangles at a quarter).
     ErrorBudget terrain_budget_at(int z, double eps) const {
-        return budget_with(z, eps, kTerrainSagShare);
+        const double spare = 1 - 1.0 / 8 - relief() / eps;
+        return budget_with(z, eps, std::max(kTerrainSagShare, std::min(kTerrainSagMost, spare)));
     }
     ErrorBudget budget_with(int z, double eps, double sag_share) const {
         return zoom_source(z) == ZoomSource::Pixels
@@ -1124,6 +1178,8 @@ private:
     bool summary_ok_ = false; // the summary serves this scheme's coarse zooms (summary_serves)
     mutable std::once_flag summary_once_;
     mutable std::optional<DemSummary> summary_;
+    mutable std::once_flag reach_once_;
+    mutable std::vector<double> reach_;
     mutable std::mutex measured_mutex_;
     mutable std::map<TileId, double> measured_;
     mutable std::size_t over_eps_ = 0;

@@ -57,6 +57,10 @@ struct LayerOptions {
     // record it). Balanced: 3-11 % more triangles than best for 80-85 % of its work
     // (bench/README.md, "Effort levels").
     core::Effort effort = core::Effort::Balanced;
+    // Where the DEM's multi-resolution summary is kept between runs (summary_file.hpp): a
+    // directory, "off", or empty for the default ($XDG_CACHE_HOME or ~/.cache, /terrabound) for
+    // sources of 16 Mpixel and more.
+    std::string summary_dir;
 };
 
 // How a layer makes its published error true at every valid pixel of the source.

@@ -182,9 +182,12 @@ TEST_CASE("a built store is served only with the settings it was built with; its
         other.finest_eps = 3;
         CHECK_THROWS_WITH_AS(
             prepare_store_for_serving(*store, *Layer::open(other)),
-            doctest::Contains("made by terrabound build with other settings (eps was [4, 2], now "
-                              "[6, 3])"),
+            doctest::Contains("made by terrabound build with other settings (eps was ["),
             tb::InputError);
+        // The finest zooms' eps are the ladder's own (coarser ones may follow the data's reach).
+        CHECK_THROWS_WITH_AS(prepare_store_for_serving(*store, *Layer::open(other)),
+                             doctest::Contains(", 2], now ["),
+                             tb::InputError);
         CHECK(store->get_document("hill", kBuildManifest) == built);
         CHECK_FALSE(store->get_document("hill", kServeManifest));
 

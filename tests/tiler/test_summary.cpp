@@ -5,10 +5,15 @@
 #include "tiler/mesh/cell_check.hpp"
 #include "tiler/sources/geoid.hpp"
 #include "tiler/summary/dem_summary.hpp"
+#include "tiler/summary/summary_file.hpp"
 
 #include <doctest/doctest.h>
 
 #include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <random>
 
 using namespace tb::tiler;
@@ -201,4 +206,205 @@ TEST_CASE("every valid pixel of a DEM lies within its summary block's plane and 
         // A block of voids only is empty.
         CHECK(s.block(3, 32, 1)->empty());
     }
+}
+
+namespace {
+
+// A small lon/lat DEM with relief, written as a GeoTIFF.
+std::string rough_dem(const tb_test::ScratchDir& dir, const std::string& name, double lift) {
+    tb_test::Fixture f;
+    f.width = 173, f.height = 131;
+    f.values.resize(static_cast<std::size_t>(f.width) * f.height);
+    for (int j = 0; j < f.height; ++j) {
+        for (int i = 0; i < f.width; ++i) {
+            f.values[static_cast<std::size_t>(j) * f.width + i] =
+                lift + 500 + 200 * std::sin(i / 9.0) * std::cos(j / 13.0) + (i * 7 + j * 3) % 5;
+        }
+    }
+    f.type = GDT_Float32;
+    f.geotransform = std::array<double, 6>{7.6, 1.0 / 1200, 0, 46.4, 0, -1.0 / 1200};
+    f.epsg = 4326;
+    return tb_test::write_fixture(dir.file(name), f);
+}
+
+bool same_blocks(const DemSummary& a, const DemSummary& b) {
+    if (a.width() != b.width() || a.height() != b.height() ||
+        a.levels().size() != b.levels().size()) {
+        return false;
+    }
+    for (std::size_t k = 0; k < a.levels().size(); ++k) {
+        const auto& x = a.levels()[k];
+        const auto& y = b.levels()[k];
+        if (x.size() != y.size() ||
+            !std::equal(x.begin(), x.end(), y.begin(), [](const auto& p, const auto& q) {
+                return std::memcmp(&p, &q, sizeof(SummaryBlock)) == 0;
+            })) {
+            return false;
+        }
+    }
+    return true;
+}
+
+} // namespace
+
+TEST_CASE("a summary saved to disk reads back block for block, and a damaged, cut or foreign "
+          "file is refused") {
+    tb_test::ScratchDir dir;
+    const std::string dem = rough_dem(dir, "rough.tif", 0);
+    const auto source = DemSource::open({dem});
+    const auto grid = source->pixel_grid(Scheme::Geodetic);
+    REQUIRE(grid);
+    const DemSummary made = DemSummary::build(*source, *grid, VerticalDatum::Ellipsoid);
+    const auto key = summary_key({dem}, std::nullopt, VerticalDatum::Ellipsoid, *grid);
+    REQUIRE(key);
+    const auto path = summary_path(dir.file("cache"), dem, *key);
+    CHECK(path.filename().string().rfind("rough-", 0) == 0);
+    CHECK_FALSE(load_summary(path, *key)); // nothing there yet
+    save_summary(path, *key, made);
+    const auto read = load_summary(path, *key);
+    REQUIRE(read);
+    CHECK(same_blocks(made, *read));
+    // Another key (another datum) does not read this file.
+    const auto other = summary_key({dem}, std::nullopt, VerticalDatum::Egm96, *grid);
+    REQUIRE(other);
+    CHECK(*other != *key);
+    CHECK(summary_path(dir.file("cache"), dem, *other) != path);
+    CHECK_FALSE(load_summary(path, *other));
+    // One flipped bit, then a cut file: refused, never read as a summary.
+    std::string bytes;
+    {
+        std::ifstream in(path, std::ios::binary);
+        bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+    }
+    const auto write = [&path](const std::string& b) {
+        std::ofstream(path, std::ios::binary | std::ios::trunc) << b;
+    };
+    std::string flipped = bytes;
+    flipped[flipped.size() / 2] ^= 0x10;
+    write(flipped);
+    CHECK_FALSE(load_summary(path, *key));
+    write(bytes.substr(0, bytes.size() - 100));
+    CHECK_FALSE(load_summary(path, *key));
+    write(bytes);
+    CHECK(load_summary(path, *key));
+}
+
+TEST_CASE("a layer keeps its summary in summary_dir, reads it back, and makes a new one when the "
+          "source changes") {
+    tb_test::ScratchDir dir;
+    const std::string dem = rough_dem(dir, "valley.tif", 0);
+    const std::string cache = dir.file("summaries");
+    const auto open = [&] {
+        LayerOptions o;
+        o.sources = {dem};
+        o.summary_dir = cache;
+        o.min_zoom = 0;
+        return Layer::open(o);
+    };
+    const auto files = [&] {
+        std::vector<std::filesystem::path> out;
+        if (std::filesystem::exists(cache)) {
+            for (const auto& e : std::filesystem::directory_iterator(cache)) {
+                out.push_back(e.path());
+            }
+        }
+        return out;
+    };
+    auto first = open();
+    const TileRange r = first->tiles_at(4); // lattice steps of 13 pixels: read off the summary
+    REQUIRE(r.count() == 1);
+    const TileId id{4, r.x0, r.y0};
+    const std::string tile = first->make_tile(id, Format::Glb, {});
+    first.reset(); // its dataset closed, as a later run would find it
+    REQUIRE(files().size() == 1);
+    const auto kept = files().front();
+    CHECK(kept.extension() == ".tbsum");
+    const auto written = std::filesystem::last_write_time(kept);
+    // A second layer reads the file (it is not written again) and makes the same tile.
+    CHECK(open()->make_tile(id, Format::Glb, {}) == tile);
+    CHECK(std::filesystem::last_write_time(kept) == written);
+    // The source changes: a new summary under a new name, and its tile follows the new heights.
+    std::filesystem::remove(dem);
+    rough_dem(dir, "valley.tif", 300);
+    CHECK(open()->make_tile(id, Format::Glb, {}) != tile);
+    CHECK(files().size() == 2);
+    // "off" keeps nothing.
+    LayerOptions off;
+    off.sources = {dem};
+    off.summary_dir = "off";
+    off.min_zoom = 0;
+    std::filesystem::remove_all(cache);
+    Layer::open(off)->make_tile(id, Format::Glb, {});
+    CHECK(files().empty());
+}
+
+TEST_CASE("a sparse GeoTIFF's unwritten blocks are voids in the summary, not read, and the "
+          "written ones are summarised as a dense file's") {
+    tb_test::ScratchDir dir;
+    GDALAllRegister();
+    const int n = 4096;
+    const std::string path = dir.file("sparse.tif");
+    {
+        char** create = nullptr;
+        create = CSLSetNameValue(create, "SPARSE_OK", "TRUE");
+        create = CSLSetNameValue(create, "TILED", "YES");
+        GDALDatasetUniquePtr ds(GetGDALDriverManager()->GetDriverByName("GTiff")->Create(
+            path.c_str(), n, n, 1, GDT_Int16, create));
+        CSLDestroy(create);
+        REQUIRE(ds);
+        const std::array<double, 6> g{7.0, 1.0 / 1200, 0, 47.0, 0, -1.0 / 1200};
+        ds->SetGeoTransform(const_cast<double*>(g.data()));
+        OGRSpatialReference srs;
+        srs.importFromEPSG(4326);
+        ds->SetSpatialRef(&srs);
+        ds->GetRasterBand(1)->SetNoDataValue(-32768);
+        // One written window of 300 x 200 pixels at (1000, 2000); everything else unwritten.
+        std::vector<std::int16_t> hill(300 * 200);
+        for (int j = 0; j < 200; ++j) {
+            for (int i = 0; i < 300; ++i) {
+                hill[static_cast<std::size_t>(j) * 300 + i] = static_cast<std::int16_t>(
+                    400 + 100 * std::sin(i / 20.0) + 50 * std::cos(j / 15.0));
+            }
+        }
+        REQUIRE(
+            ds->GetRasterBand(1)->RasterIO(
+                GF_Write, 1000, 2000, 300, 200, hill.data(), 300, 200, GDT_Int16, 0, 0, nullptr) ==
+            CE_None);
+    }
+    const auto source = DemSource::open({path});
+    CHECK(source->window_empty(0, 0, 512, 512));
+    CHECK_FALSE(source->window_empty(1024, 2048, 256, 256));
+    const auto grid = source->pixel_grid(Scheme::Geodetic);
+    REQUIRE(grid);
+    const DemSummary s = DemSummary::build(*source, *grid, VerticalDatum::Ellipsoid);
+    const std::vector<double> px = source->read_pixels(0, 0, n, n);
+    std::size_t checked = 0, empty = 0;
+    const int k = s.finest_level();
+    for (std::int64_t by = 0; by < s.blocks_down(k); ++by) {
+        for (std::int64_t bx = 0; bx < s.blocks_across(k); ++bx) {
+            const SummaryBlock* b = s.block(k, bx, by);
+            bool any = false;
+            for (std::int64_t j = by << k; j <= s.last_row(k, by); ++j) {
+                for (std::int64_t i = bx << k; i <= s.last_column(k, bx); ++i) {
+                    const double h = px[static_cast<std::size_t>(j * n + i)];
+                    if (std::isnan(h)) {
+                        continue;
+                    }
+                    any = true;
+                    const double r = h - DemSummary::plane(*b, k, bx, by, double(i), double(j));
+                    CHECK(r >= b->low);
+                    CHECK(r <= b->high);
+                    ++checked;
+                }
+            }
+            CHECK(b->empty() == !any);
+            empty += b->empty() ? 1 : 0;
+        }
+    }
+    CHECK(checked == 300 * 200);
+    CHECK(empty > 250000);
+    // 4096^2 pixels keep the finest level; a 100000^2 raster starts at 64-pixel blocks.
+    CHECK(k == kFinestLevel);
+    CHECK(summary_finest_level(100000, 100000) == 6);
+    CHECK(summary_finest_level(14404, 14404) == kFinestLevel);
 }

@@ -48,6 +48,9 @@ Manifest tile_settings(const Layer& layer) {
     m.emplace_back("datum", json_string(to_string(layer.source_datum())));
     m.emplace_back("min_zoom", std::to_string(layer.min_zoom()));
     m.emplace_back("max_zoom", std::to_string(layer.max_zoom()));
+    // Before eps, which follows the data (the reach of rough zooms): a resume refused over a
+    // changed --nodata names nodata, not the eps it moved.
+    m.emplace_back("nodata", o.nodata ? json_number(*o.nodata, "--nodata") : "null");
     std::string eps = "[";
     for (int z = layer.min_zoom(); z <= layer.max_zoom(); ++z) {
         eps += (z > layer.min_zoom() ? ", " : "") + json_number(layer.eps_for_zoom(z));
@@ -58,7 +61,6 @@ Manifest tile_settings(const Layer& layer) {
         levels += (i ? ", " : "") + json_number(o.eps_levels[i]);
     }
     m.emplace_back("eps_levels", levels + "]");
-    m.emplace_back("nodata", o.nodata ? json_number(*o.nodata, "--nodata") : "null");
     const DemTilePlan dem = dem_tile_plan(layer);
     m.emplace_back("dem_tile_size", std::to_string(dem.tile_size));
     m.emplace_back("dem_heights", json_string(to_string(o.dem_heights)));

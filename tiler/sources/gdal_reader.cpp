@@ -173,6 +173,8 @@ public:
     }
     std::vector<double>
     read_pixels(std::int64_t column0, std::int64_t row0, int width, int height) const override;
+    bool
+    window_empty(std::int64_t column0, std::int64_t row0, int width, int height) const override;
     std::vector<SourcePixel> pixels_in(const LonLatBox& box) const override;
 
 private:
@@ -547,6 +549,21 @@ GdalDemSource::read_pixels(std::int64_t column0, std::int64_t row0, int width, i
         }
     }
     return out;
+}
+
+bool GdalDemSource::window_empty(std::int64_t column0,
+                                 std::int64_t row0,
+                                 int width,
+                                 int height) const {
+    // Unwritten blocks read as the file's nodata value (0 without one): only then are they voids.
+    if (!info_.nodata || info_.nodata_given || column0 < 0 || row0 < 0 ||
+        column0 + width > info_.width || row0 + height > info_.height) {
+        return false;
+    }
+    Lease h = acquire();
+    const int status = h->ds->GetRasterBand(1)->GetDataCoverageStatus(
+        static_cast<int>(column0), static_cast<int>(row0), width, height);
+    return status == GDAL_DATA_COVERAGE_STATUS_EMPTY;
 }
 
 std::vector<SourcePixel> GdalDemSource::pixels_in(const LonLatBox& box) const {

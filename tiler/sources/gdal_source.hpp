@@ -169,6 +169,13 @@ public:
     virtual std::vector<double>
     read_pixels(std::int64_t column0, std::int64_t row0, int width, int height) const = 0;
 
+    // True when GDAL knows, without reading, that every pixel of the window reads as the
+    // source's own nodata (unwritten blocks of a sparse GeoTIFF, VRT areas no source covers).
+    // False when it does not know, or such pixels would read as a height (no nodata, or a
+    // --nodata override). Thread-safe.
+    virtual bool
+    window_empty(std::int64_t column0, std::int64_t row0, int width, int height) const = 0;
+
     // Every valid full-resolution pixel whose centre lies in `box` (closed), its centre
     // transformed to WGS84 lon/lat. Throws InputError when the window it needs exceeds
     // kMaxPixelsPerTile. Requires georeferenced(). Thread-safe.

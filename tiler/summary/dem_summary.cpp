@@ -77,7 +77,7 @@ const SummaryBlock* DemSummary::block(int level, std::int64_t bx, std::int64_t b
     if (bx < 0 || by < 0 || bx >= blocks_across(level) || by >= blocks_down(level)) {
         return nullptr;
     }
-    return &levels_[static_cast<std::size_t>(level - kFinestLevel)]
+    return &levels_[static_cast<std::size_t>(level - finest_)]
                    [static_cast<std::size_t>(by * blocks_across(level) + bx)];
 }
 
@@ -91,19 +91,20 @@ std::size_t DemSummary::bytes() const {
 
 namespace {
 
-// One block of the finest level from its pixels (heights ellipsoidal, NaN for voids), `px` the
-// strip read, `row0` its first row, `w` its width.
+// One block of level k (the finest) from its pixels (heights ellipsoidal, NaN for voids), `px`
+// the window read, (column0, row0) its first pixel, `w` its width.
 SummaryBlock fit_pixels(const std::vector<double>& px,
+                        int k,
                         int w,
+                        std::int64_t column0,
                         std::int64_t row0,
                         std::int64_t bx,
                         std::int64_t by,
                         std::int64_t last_col,
                         std::int64_t last_row) {
-    constexpr int k = kFinestLevel;
     const double ci = DemSummary::centre(k, bx), cj = DemSummary::centre(k, by);
     const auto at = [&](std::int64_t i, std::int64_t j) {
-        return px[static_cast<std::size_t>((j - row0) * w + i)];
+        return px[static_cast<std::size_t>((j - row0) * w + (i - column0))];
     };
     Moments m;
     for (std::int64_t j = by << k; j <= last_row; ++j) {
@@ -186,13 +187,59 @@ SummaryBlock DemSummary::fit_children(int level, std::int64_t bx, std::int64_t b
     return out;
 }
 
+int summary_finest_level(std::int64_t width, std::int64_t height) {
+    int level = kFinestLevel;
+    const auto blocks = [&](int k) {
+        const std::int64_t side = std::int64_t{1} << k;
+        return ((width + side - 1) / side) * ((height + side - 1) / side);
+    };
+    while (blocks(level) > kMaxFinestBlocks) {
+        ++level;
+    }
+    return level;
+}
+
+void DemSummary::fit_window(const DemSource& source,
+                            const PixelGrid& grid,
+                            const std::vector<Egm96Column>& columns,
+                            VerticalDatum datum,
+                            std::int64_t column0,
+                            std::int64_t row0,
+                            int width,
+                            int height) {
+    const int k = finest_;
+    if (source.window_empty(column0, row0, width, height)) {
+        return; // its blocks stay empty
+    }
+    std::vector<double> px = source.read_pixels(column0, row0, width, height);
+    if (datum == VerticalDatum::Egm96) {
+        for (int j = 0; j < height; ++j) {
+            const Egm96Row r = egm96_row(lat_of(grid, column0, row0 + j));
+            for (int i = 0; i < width; ++i) {
+                px[static_cast<std::size_t>(j) * width + i] +=
+                    egm96_at(columns[static_cast<std::size_t>(column0 + i)], r);
+            }
+        }
+    }
+    auto& finest = levels_.front();
+    const std::int64_t across = blocks_across(k);
+    for (std::int64_t by = row0 >> k; by <= (row0 + height - 1) >> k; ++by) {
+        for (std::int64_t bx = column0 >> k; bx <= (column0 + width - 1) >> k; ++bx) {
+            finest[static_cast<std::size_t>(by * across + bx)] = fit_pixels(
+                px, k, width, column0, row0, bx, by, last_column(k, bx), last_row(k, by));
+        }
+    }
+}
+
 DemSummary DemSummary::build(const DemSource& source, const PixelGrid& grid, VerticalDatum datum) {
     DemSummary s;
     s.width_ = grid.width;
     s.height_ = grid.height;
+    s.finest_ = summary_finest_level(grid.width, grid.height);
     const std::string& path = source.info().path;
     log::info(path + ": making its multi-resolution summary (" + std::to_string(grid.width) +
-              " x " + std::to_string(grid.height) + " pixels)");
+              " x " + std::to_string(grid.height) + " pixels, blocks of " +
+              std::to_string(1 << s.finest_) + " pixels and up)");
     std::vector<Egm96Column> columns;
     if (datum == VerticalDatum::Egm96) {
         columns.resize(static_cast<std::size_t>(grid.width));
@@ -200,42 +247,24 @@ DemSummary DemSummary::build(const DemSource& source, const PixelGrid& grid, Ver
             columns[static_cast<std::size_t>(i)] = egm96_column(s.lon_of(grid, i, 0));
         }
     }
-    constexpr int kStripRows = 32 << kFinestLevel;
-    const std::int64_t across = s.blocks_across(kFinestLevel);
-    auto& finest = s.levels_.emplace_back();
-    finest.reserve(static_cast<std::size_t>(across * s.blocks_down(kFinestLevel)));
+    // Windows of at most 256 x 2048 pixels (16 MiB of doubles), whole blocks each.
+    const int rows = std::max(256, 1 << s.finest_), cols = std::max(2048, 1 << s.finest_);
+    s.levels_.emplace_back(
+        static_cast<std::size_t>(s.blocks_across(s.finest_) * s.blocks_down(s.finest_)), kEmpty);
     int reported = 0;
-    for (std::int64_t row0 = 0; row0 < grid.height; row0 += kStripRows) {
-        const int rows = static_cast<int>(std::min<std::int64_t>(kStripRows, grid.height - row0));
-        std::vector<double> px = source.read_pixels(0, row0, grid.width, rows);
-        if (datum == VerticalDatum::Egm96) {
-            for (int j = 0; j < rows; ++j) {
-                const Egm96Row r = egm96_row(s.lat_of(grid, 0, row0 + j));
-                for (int i = 0; i < grid.width; ++i) {
-                    double& h = px[static_cast<std::size_t>(j) * grid.width + i];
-                    h += egm96_at(columns[static_cast<std::size_t>(i)], r);
-                }
-            }
+    for (std::int64_t row0 = 0; row0 < grid.height; row0 += rows) {
+        const int h = static_cast<int>(std::min<std::int64_t>(rows, grid.height - row0));
+        for (std::int64_t column0 = 0; column0 < grid.width; column0 += cols) {
+            const int w = static_cast<int>(std::min<std::int64_t>(cols, grid.width - column0));
+            s.fit_window(source, grid, columns, datum, column0, row0, w, h);
         }
-        for (std::int64_t by = row0 >> kFinestLevel; by < (row0 + rows + 7) >> kFinestLevel; ++by) {
-            for (std::int64_t bx = 0; bx < across; ++bx) {
-                finest.push_back(fit_pixels(px,
-                                            grid.width,
-                                            row0,
-                                            bx,
-                                            by,
-                                            s.last_column(kFinestLevel, bx),
-                                            s.last_row(kFinestLevel, by)));
-            }
-        }
-        const int percent = static_cast<int>(100 * (row0 + rows) / grid.height);
-        if (percent >= reported + 10 || row0 + rows == grid.height) {
+        const int percent = static_cast<int>(100 * (row0 + h) / grid.height);
+        if (percent >= reported + 10 || row0 + h == grid.height) {
             reported = percent;
             log::info(path + ": summary " + std::to_string(percent) + " % read");
         }
     }
-    for (int level = kFinestLevel + 1;
-         s.blocks_across(level - 1) > 1 || s.blocks_down(level - 1) > 1;
+    for (int level = s.finest_ + 1; s.blocks_across(level - 1) > 1 || s.blocks_down(level - 1) > 1;
          ++level) {
         std::vector<SummaryBlock> blocks;
         blocks.reserve(static_cast<std::size_t>(s.blocks_across(level) * s.blocks_down(level)));
@@ -249,6 +278,28 @@ DemSummary DemSummary::build(const DemSource& source, const PixelGrid& grid, Ver
     log::info(path + ": summary ready, levels " + std::to_string(s.finest_level()) + ".." +
               std::to_string(s.coarsest_level()) + ", " + std::to_string(s.bytes() / 1024) +
               " KiB");
+    return s;
+}
+
+std::optional<DemSummary>
+DemSummary::from_levels(int width, int height, std::vector<std::vector<SummaryBlock>> levels) {
+    if (width < 1 || height < 1 || levels.empty()) {
+        return std::nullopt;
+    }
+    DemSummary s;
+    s.width_ = width;
+    s.height_ = height;
+    s.finest_ = summary_finest_level(width, height);
+    for (std::size_t k = 0; k < levels.size(); ++k) {
+        const int level = s.finest_ + static_cast<int>(k);
+        const bool last = s.blocks_across(level) == 1 && s.blocks_down(level) == 1;
+        const auto count = static_cast<std::size_t>(s.blocks_across(level) * s.blocks_down(level));
+        // The coarsest level is the first of one block (or the finest when that is one block).
+        if (levels[k].size() != count || last != (k + 1 == levels.size())) {
+            return std::nullopt;
+        }
+    }
+    s.levels_ = std::move(levels);
     return s;
 }
 

@@ -16,12 +16,15 @@
 // each coarser level is fitted to its four children's planes, and its range is made from
 // theirs: child plane minus parent plane is linear over the child's box, so its extremes at the
 // box's corners plus the child's range bound every pixel of the child. The ranges are rounded
-// outward to float. Made in one pass over the source, a strip of 2^kFinestLevel rows at a time.
+// outward to float. Made in one pass over the source, a window of rows and columns at a time
+// (windows GDAL reports empty, as in sparse files, are not read).
 #include "tiler/layer.hpp"
 #include "tiler/sources/gdal_source.hpp"
+#include "tiler/sources/geoid.hpp"
 
 #include <cmath>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -36,6 +39,14 @@ struct SummaryBlock {
 // The finest level kept: 8 x 8 pixel blocks, 20 bytes per 64 pixels (65 MB for 207 Mpixel).
 // Coarser zooms than that read the summary; finer ones read the pixels themselves.
 inline constexpr int kFinestLevel = 3;
+// Sources whose finest level would hold more blocks than this (over 537 Mpixel) start at a
+// coarser level instead, so that the summary's memory stays under about 220 MB whatever the
+// source's size (a 100000^2 raster: level 6, 2.4 M blocks).
+inline constexpr std::int64_t kMaxFinestBlocks = std::int64_t{1} << 23;
+
+// The finest level of a width x height source's summary: kFinestLevel, or the first coarser one
+// within kMaxFinestBlocks.
+int summary_finest_level(std::int64_t width, std::int64_t height);
 
 class DemSummary {
 public:
@@ -45,8 +56,8 @@ public:
 
     int width() const { return width_; } // the source's pixels
     int height() const { return height_; }
-    int finest_level() const { return kFinestLevel; }
-    int coarsest_level() const { return kFinestLevel + static_cast<int>(levels_.size()) - 1; }
+    int finest_level() const { return finest_; }
+    int coarsest_level() const { return finest_ + static_cast<int>(levels_.size()) - 1; }
     std::int64_t blocks_across(int level) const;
     std::int64_t blocks_down(int level) const;
     // The block, or nullptr outside the raster; level in finest_level()..coarsest_level().
@@ -68,13 +79,34 @@ public:
 
     std::size_t bytes() const; // memory held
 
+    // Every level's blocks, finest first, each row-major (what summary_file.hpp stores).
+    const std::vector<std::vector<SummaryBlock>>& levels() const { return levels_; }
+    // A summary of a width x height source from stored levels; nullopt unless they have the
+    // shape build() gives: levels from the finest up to the first of one block, each
+    // blocks_across x blocks_down blocks.
+    static std::optional<DemSummary>
+    from_levels(int width, int height, std::vector<std::vector<SummaryBlock>> levels);
+
+    // Reads the window of the source's columns column0.. (width of them) and rows row0..
+    // (height) and fits the finest level's blocks in it (both a multiple of the blocks' side
+    // away from 0); skipped when GDAL knows the window holds no data (sparse files).
+    void fit_window(const DemSource& source,
+                    const PixelGrid& grid,
+                    const std::vector<Egm96Column>& undulation_columns,
+                    VerticalDatum datum,
+                    std::int64_t column0,
+                    std::int64_t row0,
+                    int width,
+                    int height);
+
 private:
     SummaryBlock fit_children(int level, std::int64_t bx, std::int64_t by) const;
     static double lon_of(const PixelGrid& grid, std::int64_t i, std::int64_t j);
     static double lat_of(const PixelGrid& grid, std::int64_t i, std::int64_t j);
 
     int width_ = 0, height_ = 0;
-    std::vector<std::vector<SummaryBlock>> levels_; // levels_[k - kFinestLevel], row-major
+    int finest_ = kFinestLevel;
+    std::vector<std::vector<SummaryBlock>> levels_; // levels_[k - finest_], row-major
 };
 
 } // namespace tb::tiler

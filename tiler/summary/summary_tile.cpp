@@ -5,6 +5,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
+#include <utility>
 
 namespace tb::tiler {
 namespace {
@@ -37,10 +39,52 @@ int summary_level(
 
 int summary_level(const DemSummary& summary, double pixels_per_step) {
     const int level = static_cast<int>(std::floor(std::log2(pixels_per_step) + 1e-9));
-    if (level < summary.finest_level()) {
+    if (level < kFinestLevel) {
         return -1;
     }
-    return std::min(level, summary.coarsest_level());
+    // A source too large for kFinestLevel keeps coarser blocks only: a zoom finer than them
+    // reads them all the same, its bound held by blocks wider than its lattice step.
+    return std::clamp(level, summary.finest_level(), summary.coarsest_level());
+}
+
+double
+zoom_reach(const DemSummary& summary, const PixelGrid& grid, Scheme scheme, int z, int size) {
+    const double step = pixels_per_step(grid, scheme, z, size);
+    const int level = std::max(summary_level(summary, step), summary.finest_level());
+    const double scale = step / std::exp2(level);
+    std::map<std::pair<std::int64_t, std::int64_t>, double> roughest; // per tile (x, y)
+    for (std::int64_t by = 0; by < summary.blocks_down(level); ++by) {
+        for (std::int64_t bx = 0; bx < summary.blocks_across(level); ++bx) {
+            const SummaryBlock* b = summary.block(level, bx, by);
+            if (b == nullptr || b->empty()) {
+                continue;
+            }
+            // The tile holding the block's middle pixel.
+            const auto i = ((bx << level) + summary.last_column(level, bx)) / 2;
+            const auto j = ((by << level) + summary.last_row(level, by)) / 2;
+            const LonLat p = grid.lonlat ? LonLat{grid.x(i), grid.y(j)}
+                                         : native_to_lonlat(Scheme::Mercator, grid.x(i), grid.y(j));
+            constexpr double kPoint = 1e-9; // degrees: a box around the point, inside one tile
+            const TileRange r = tiles_covering(
+                scheme, {p.lon - kPoint, p.lat - kPoint, p.lon + kPoint, p.lat + kPoint}, z);
+            if (r.empty()) {
+                continue;
+            }
+            double& rough = roughest[{r.x0, r.y0}];
+            rough = std::max(rough, (static_cast<double>(b->high) - b->low) * scale);
+        }
+    }
+    if (roughest.empty()) {
+        return 0.0;
+    }
+    std::vector<double> values;
+    values.reserve(roughest.size());
+    for (const auto& [tile, rough] : roughest) {
+        values.push_back(rough);
+    }
+    const auto mid = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
+    std::nth_element(values.begin(), mid, values.end());
+    return *mid;
 }
 
 LatticeBlock summary_lattice(const DemSummary& summary,

@@ -22,11 +22,21 @@ bool summary_serves(const PixelGrid& grid, Scheme scheme);
 double pixels_per_step(const PixelGrid& grid, Scheme scheme, int z, int size);
 
 // The summary level a zoom reads: its blocks no wider than a lattice step, so each lattice cell
-// is judged against blocks of its own size or smaller. -1 when the step is narrower than the
-// finest level's blocks (such a zoom reads pixels).
+// is judged against blocks of its own size or smaller (or the summary's finest, for a source too
+// large to keep kFinestLevel). -1 when the step is narrower than kFinestLevel's blocks (such a
+// zoom reads pixels).
 int summary_level(const DemSummary& summary, const PixelGrid& grid, Scheme scheme, int z, int size);
 // The same for a given number of source pixels per lattice step (any lattice, e.g. DEM tiles').
 int summary_level(const DemSummary& summary, double pixels_per_step);
+
+// How far zoom z's lattice cells stray from flat where the data is rough: each summary block of
+// the zoom's level (at least the finest) has its residual range scaled to a lattice step (a
+// block's relief grows about linearly with its width); each tile over the data takes its roughest
+// block, and the zoom's reach is the median over those tiles, in metres. A coarse tile cannot be
+// drawn closer to its pixels than about half its cells' ranges, whatever its triangles, so a
+// layer meshes such zooms at a share of the reach instead of paying for flat-lattice detail that
+// the published bound cannot show.
+double zoom_reach(const DemSummary& summary, const PixelGrid& grid, Scheme scheme, int z, int size);
 
 // The lattice points (column0 + i, row0 + j) of (scheme, z, size), as DemSource::sample gives
 // them, each the plane of the block it lies in: heights in the source's datum (EGM96 sources: the
