@@ -105,8 +105,10 @@ std::string describe_zoom(const tiler::Layer& layer, int z) {
 
 // The pyramid a layer of this DEM would have: zooms, tiles per zoom, eps per zoom, and what
 // each zoom reads of the source.
-std::string
-describe_pyramid(const std::string& path, tiler::Scheme scheme, std::optional<double> nodata) {
+std::string describe_pyramid(const std::string& path,
+                             tiler::Scheme scheme,
+                             std::optional<double> nodata,
+                             const std::string& summary_dir) {
     std::ostringstream out;
     out.precision(6);
     std::shared_ptr<const tiler::Layer> layer;
@@ -115,6 +117,7 @@ describe_pyramid(const std::string& path, tiler::Scheme scheme, std::optional<do
         options.sources = {path};
         options.scheme = scheme;
         options.nodata = nodata;
+        options.summary_dir = summary_dir;
         layer = tiler::Layer::open(options);
     } catch (const InputError& e) {
         out << "  pyramid:     none (" << e.what() << ")\n";
@@ -168,7 +171,9 @@ int run(const Args& args) {
     for (const auto& path : args.positional) {
         std::fputs(describe(tiler::inspect_dem(path, tiler::kExactRangeSamples, nodata)).c_str(),
                    stdout);
-        std::fputs(describe_pyramid(path, scheme, nodata).c_str(), stdout);
+        std::fputs(
+            describe_pyramid(path, scheme, nodata, args.get("summary-dir").value_or("")).c_str(),
+            stdout);
     }
     return 0;
 }
@@ -181,14 +186,17 @@ const Command& info_command() {
          "DEM...",
          "Describe a DEM: size, CRS, data type, nodata, height range, resolution, pyramid.",
          {{"scheme", "NAME", "pyramid plan for geodetic (default) or mercator tiles"},
-          {"nodata", "V", "raw sample value to treat as nodata, replacing the file's own"}},
+          {"nodata", "V", "raw sample value to treat as nodata, replacing the file's own"},
+          {"summary-dir", "DIR", kSummaryDirHelp}},
          "The pyramid plan is what 'terrabound build' and 'serve' make of the DEM alone with\n"
          "default options: zoom range, tiles per zoom, each zoom's eps (metres), how that eps\n"
          "is made true at the DEM's own pixels (the guarantee), and what its tiles read: the\n"
          "DEM's pixels at full resolution (the finest zoom of lon/lat DEMs, and of EPSG:3857\n"
          "ones for mercator), the DEM's multi-resolution summary (zooms whose lattice step\n"
          "spans 8 pixels or more), or every 2^k-th pixel or an overview, checked at full\n"
-         "resolution (the zooms between, and every zoom of a DEM in another CRS)."},
+         "resolution (the zooms between, and every zoom of a DEM in another CRS). The eps of\n"
+         "zooms read from the summary follows the data's roughness there, so info makes the\n"
+         "summary (kept on disk for DEMs of 16 Mpixel and more, see --summary-dir)."},
         run};
     return command;
 }

@@ -53,6 +53,7 @@ int run(const Args& args) {
     if (args.has("nodata")) {
         options.nodata = args.get_double("nodata", 0);
     }
+    options.summary_dir = args.get("summary-dir").value_or("");
     const auto layer = tiler::Layer::open(options);
     const double eps = args.has("eps") ? args.get_double("eps", 0) : layer->eps_for_zoom(id.z);
     tiler::check_eps(eps, "tile: --eps");
@@ -122,6 +123,7 @@ const Command& tile_command() {
               "LEVEL",
               "mesher effort: fast, balanced (default) or best; the same bound at each, best the "
               "fewest triangles"},
+             {"summary-dir", "DIR", kSummaryDirHelp},
          },
          "Outputs: .glb (glTF + Draco, ECEF), .drc (Draco, local ENU), .obj (the mesh in the\n"
          "grid coordinates of the samples it was meshed on: v column row height, heights above\n"

@@ -12,6 +12,11 @@ struct Command {
     int (*run)(const Args& args); // returns the exit code; throws tb::Error on failure
 };
 
+// --summary-dir, as serve, build, tile and info take it (LayerOptions::summary_dir).
+inline constexpr const char* kSummaryDirHelp =
+    "where the DEM's multi-resolution summary is kept between runs, or 'off' (default: "
+    "$XDG_CACHE_HOME/terrabound or ~/.cache/terrabound, for DEMs of 16 Mpixel and more)";
+
 const Command& serve_command();
 const Command& build_command();
 const Command& tile_command();
