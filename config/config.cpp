@@ -225,7 +225,8 @@ void parse_server(Checker& check, const json& value, ServerConfig& out) {
                       "cors_origins",
                       "log_level",
                       "queue_limit",
-                      "metrics"});
+                      "metrics",
+                      "memory_mb"});
     if (value.contains("host")) {
         if (auto s = check.string(value["host"], at + "/host")) {
             if (const auto problem = host_problem(*s)) {
@@ -248,6 +249,19 @@ void parse_server(Checker& check, const json& value, ServerConfig& out) {
     if (value.contains("cache_mb")) {
         if (auto v = check.integer(value["cache_mb"], at + "/cache_mb", 0, kMaxCacheMb)) {
             out.cache_mb = static_cast<std::size_t>(*v);
+        }
+    }
+    if (value.contains("memory_mb")) {
+        const json& v = value["memory_mb"];
+        if (auto mb =
+                check.integer(v, at + "/memory_mb", 0, static_cast<long long>(kMaxMemoryMb))) {
+            if (*mb != 0 && *mb < static_cast<long long>(kMinMemoryMb)) {
+                check.error(at + "/memory_mb",
+                            "expected 0 (no budget) or at least " + std::to_string(kMinMemoryMb) +
+                                ", got " + show(v));
+            } else {
+                out.memory_mb = static_cast<std::size_t>(*mb);
+            }
         }
     }
     if (value.contains("queue_limit")) {

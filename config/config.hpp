@@ -15,6 +15,11 @@
 
 namespace tb::config {
 
+// The smallest memory budget (ServerConfig::memory_mb) but none: a quarter of it, GDAL's block
+// cache, still holds a few hundred blocks.
+inline constexpr std::size_t kMinMemoryMb = 64;
+inline constexpr std::size_t kMaxMemoryMb = std::size_t{1} << 20; // 1 TiB, as cache_mb
+
 struct ServerConfig {
     std::string host = "127.0.0.1";
     int port = 8080;
@@ -24,6 +29,9 @@ struct ServerConfig {
     std::string log_level = "info";                // debug | info | warn | error | off
     int queue_limit = 64;             // generations allowed to wait for a thread; past it: 503
     std::string metrics = "loopback"; // who may read /metrics: loopback | on | off
+    // The process's memory budget, MiB; 0: none. GDAL's block cache gets a quarter, and the tile
+    // cache at most half (cache_mb is capped to it).
+    std::size_t memory_mb = 0;
 };
 
 struct LayerConfig {

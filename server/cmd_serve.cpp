@@ -83,6 +83,41 @@ config::Config config_from_dems(const std::vector<std::string>& dems) {
     return cfg;
 }
 
+// GDAL's block cache, from its C API (gdal.h; GIntBig is long long). Declared here rather than
+// included: server/ keeps GDAL's headers out (STYLE.md), and tiler/ has no wrapper for it yet.
+extern "C" {
+void GDALSetCacheMax64(long long bytes);
+long long GDALGetCacheMax64();
+}
+
+// GDAL's block cache without a memory budget, MiB (GDAL's own default is 5 % of the RAM).
+constexpr std::size_t kDefaultGdalCacheMb = 64;
+
+// Splits the process's memory: GDAL's block cache gets a quarter of the budget (64 MiB without
+// one), the tile cache cache_mb capped to half of it, the rest is left to tile generation,
+// queues and connections. Sets GDAL's cache, logs the split in one line, and returns the tile
+// cache's bytes. Call before any DEM is read.
+std::size_t split_memory(const config::ServerConfig& server) {
+    const std::size_t budget = server.memory_mb;
+    const std::size_t gdal_mb = budget ? budget / 4 : kDefaultGdalCacheMb;
+    const std::size_t cache_mb = budget ? std::min(server.cache_mb, budget / 2) : server.cache_mb;
+    GDALSetCacheMax64(static_cast<long long>(gdal_mb) << 20);
+    std::string line = budget ? "memory: " + std::to_string(budget) + " MiB budget: tile cache "
+                              : "memory: no budget (memory_mb): tile cache ";
+    line += std::to_string(cache_mb) + " MiB";
+    if (cache_mb < server.cache_mb) {
+        line += " (cache_mb " + std::to_string(server.cache_mb) + " capped to half the budget)";
+    }
+    // As GDAL has it now, so that the line shows what GDAL really uses.
+    line += ", GDAL block cache " + std::to_string(GDALGetCacheMax64() >> 20) + " MiB";
+    if (budget) {
+        line += ", " + std::to_string(budget - cache_mb - gdal_mb) +
+                " MiB left for tile generation and connections";
+    }
+    log::info(line);
+    return cache_mb << 20;
+}
+
 // A layer's sources for a log line: the first three, and how many more.
 std::string sources_text(const std::vector<std::string>& sources) {
     std::string text;
@@ -204,6 +239,16 @@ config::Config load_serve_config(const Args& args) {
         }
         cfg.server.threads = static_cast<int>(threads);
     }
+    if (args.has("memory-mb")) {
+        const long long mb = args.get_int("memory-mb", 0);
+        if (mb != 0 && (mb < static_cast<long long>(config::kMinMemoryMb) ||
+                        mb > static_cast<long long>(config::kMaxMemoryMb))) {
+            throw InputError(
+                "--memory-mb: expected 0 (no budget) or " + std::to_string(config::kMinMemoryMb) +
+                ".." + std::to_string(config::kMaxMemoryMb) + " MiB, got " + std::to_string(mb));
+        }
+        cfg.server.memory_mb = static_cast<std::size_t>(mb);
+    }
     if (auto metrics = args.get("metrics")) {
         server::parse_metrics_access(*metrics, "--metrics"); // checked here, before the layers
         cfg.server.metrics = *metrics;
@@ -291,11 +336,12 @@ int run(const Args& args) {
     StopSignals signals;
     const config::Config cfg = load_serve_config(args);
     server::Metrics metrics;
+    const std::size_t cache_bytes = split_memory(cfg.server); // before any DEM is read
     OpenedLayers opened = open_layers(cfg);
     const int threads = cfg.server.threads > 0 ? cfg.server.threads : tiler::usable_cpus();
 
     server::TileServiceOptions tile_options;
-    tile_options.cache_bytes = cfg.server.cache_mb << 20;
+    tile_options.cache_bytes = cache_bytes;
     tile_options.threads = threads;
     tile_options.queue_limit = cfg.server.queue_limit;
     server::TileService tiles(
@@ -343,12 +389,16 @@ const Command& serve_command() {
     static const Command command{
         {"serve",
          "[CONFIG.json | DEM...] [--host H] [--port P] [--threads N] [--store PATH] "
-         "[--metrics loopback|on|off]",
+         "[--metrics loopback|on|off] [--memory-mb MB]",
          "Serve terrain tiles over HTTP.",
          {{"host", "HOST", "address to listen on (default 127.0.0.1, or the config's)"},
           {"port", "PORT", "port to listen on (default 8080; 0 picks a free port)"},
           {"threads", "N", "tile generation threads (default: one per usable core)"},
           {"web", "DIR", "the viewer's directory (default: web/ of this checkout; 'none': off)"},
+          {"memory-mb",
+           "MB",
+           "memory budget: GDAL's block cache gets a quarter, the tile cache at most half "
+           "(default: none; GDAL 64 MiB, tile cache cache_mb)"},
           {"metrics",
            "WHO",
            "who may read /metrics: loopback (default: this machine only), on (anyone), off"},
