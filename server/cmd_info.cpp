@@ -43,6 +43,12 @@ std::string describe(const tiler::DemInfo& d) {
     } else {
         out << "no valid sample (every sample is nodata)\n";
     }
+    if (d.outliers > 0) {
+        out << "  outliers:    " << (d.range_exact ? "" : "at least ") << d.outliers
+            << " sample(s) outside " << tiler::kLowestHeight << " .. " << tiler::kHighestHeight
+            << " m count as nodata (first: " << d.outlier_height << " m at pixel "
+            << d.outlier_column << ", " << d.outlier_row << ")\n";
+    }
     if (d.likely_nodata && !d.nodata_given) {
         out << "  warning:     " << 100 * d.likely_nodata_share << "% of the samples are "
             << *d.likely_nodata << ", far from all the others (" << d.others_min << " .. "

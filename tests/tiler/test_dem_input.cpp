@@ -3,6 +3,7 @@
 // gone, no read permission), rasters one sample thick, voids not declared as nodata (and the
 // --nodata fix), a NUL in a path. Real files in a temp dir, the real binary (TB_BINARY).
 #include "core/error.hpp"
+#include "tests/tiler/qm_reader.hpp"
 #include "tests/tiler/test_raster_util.hpp"
 #include "tiler/sources/gdal_source.hpp"
 
@@ -86,8 +87,57 @@ TEST_CASE("to_height: NaN and +-Inf are nodata, like the nodata value; the rest 
     CHECK(std::isnan(to_height(-32767, -32767.0, false, 1, 0)));
     // A Float32 band's nodata written as a double that is not a float.
     CHECK(std::isnan(to_height(static_cast<float>(-3.4e38), -3.4e38, true, 1, 0)));
-    CHECK_FALSE(std::isnan(to_height(static_cast<float>(-3.4e38), -3.4e38, false, 1, 0)));
+    CHECK(tb::tiler::sample_height(static_cast<float>(-3.4e38), -3.4e38, false, 1, 0) < -3e38);
     CHECK(to_height(100, -32767.0, false, 0.5, 10) == 60);
+    // Outside the plausible range of Earth heights (after scale and offset): nodata.
+    CHECK(to_height(9000, none, false, 1, 0) == 9000);
+    CHECK(std::isnan(to_height(9000.5, none, false, 1, 0)));
+    CHECK(std::isnan(to_height(-12001, none, false, 1, 0)));
+    CHECK(std::isnan(to_height(3e38, none, true, 1, 0)));
+    CHECK(to_height(-32000, none, false, 0.1, 0) == -3200);
+}
+
+TEST_CASE("outliers (+-3.4e38, a 3e38 spike) are nodata: one warning names them, the build "
+          "succeeds, and every published header and bound is finite") {
+    ScratchDir dir;
+    Fixture f = hills(129);
+    f.type = GDT_Float32;
+    f.values[5 * 129 + 7] = 3.4e38;
+    f.values[40 * 129 + 90] = -3.4e38;
+    f.values[100 * 129 + 20] = 3e38;
+    const std::string dem = tb_test::write_fixture(dir.file("spikes.tif"), f);
+    const tb::tiler::DemInfo info = tb::tiler::inspect_dem(dem);
+    CHECK(info.outliers == 3);
+    CHECK(info.outlier_column == 7);
+    CHECK(info.outlier_row == 5);
+    CHECK(info.min_height == 100);
+    CHECK(info.max_height == 500);
+    const Run i = run(dir, "info " + dem);
+    REQUIRE_MESSAGE(i.code == 0, i.err);
+    CHECK(i.out.find("outliers:    3 sample(s) outside -12000 .. 9000 m") != std::string::npos);
+    const Run b = run(dir,
+                      "build " + dem + " -o " + dir.file("out") + " --formats glb,terrain" +
+                          " --threads 1 --json");
+    REQUIRE_MESSAGE(b.code == 0, b.err);
+    CHECK(b.err.find("3 sample(s) outside the plausible range of Earth heights") !=
+          std::string::npos);
+    CHECK(b.err.find("pixel (7, 5)") != std::string::npos);
+    check_json_numbers(nlohmann::json::parse(b.out));
+    check_json_numbers(nlohmann::json::parse(slurp(dir.file("out/terrain/tileset.json"))));
+    std::size_t headers = 0;
+    for (const auto& e : fs::recursive_directory_iterator(dir.file("out/terrain"))) {
+        if (e.path().extension() != ".terrain") {
+            continue;
+        }
+        const auto t = tb_qm::read(slurp(e.path().string()));
+        CAPTURE(e.path().string());
+        CHECK(std::isfinite(t.min_height));
+        CHECK(std::isfinite(t.max_height));
+        CHECK(t.max_height < 600); // the hills and the geoid, not 3.4e38
+        CHECK(std::isfinite(t.sphere[3]));
+        ++headers;
+    }
+    CHECK(headers > 0);
 }
 
 TEST_CASE("+-Inf samples are nodata: info shows a finite range and build writes valid JSON") {

@@ -754,6 +754,11 @@ std::string encode_quantized_mesh(const QuantizedMesh& q, const QuantizedMeshExt
         radius = std::max(radius, std::sqrt(dx * dx + dy * dy + dz * dz));
     }
     const std::array<double, 3> horizon = tile_horizon_point(centre, ecef, q.min_height);
+    // A header clients trust for culling and level selection: never a non-finite number (the
+    // sources' outliers are nodata, see kLowestHeight).
+    TB_ASSERT(std::isfinite(q.min_height) && std::isfinite(q.max_height) && std::isfinite(radius) &&
+              std::isfinite(centre[0] + centre[1] + centre[2]) &&
+              std::isfinite(horizon[0] + horizon[1] + horizon[2]));
 
     std::string out;
     const bool wide = n > 65536;

@@ -697,6 +697,41 @@ core::HeightGrid GdalDemSource::read_all() const {
 }
 
 // Refuses a DEM whose extreme value looks like undeclared voids, naming the fix.
+// One warning per source holding samples outside kLowestHeight..kHighestHeight: how many, and
+// where the first one lies (pixel, and its place in the DEM's CRS).
+void warn_outliers(const DemInfo& info) {
+    if (info.outliers == 0) {
+        return;
+    }
+    const auto& g = info.geotransform;
+    const double px = static_cast<double>(info.outlier_column) + 0.5;
+    const double py = static_cast<double>(info.outlier_row) + 0.5;
+    char text[512];
+    std::snprintf(text,
+                  sizeof text,
+                  ": %s%lld sample(s) outside the plausible range of Earth heights (%g .. %g m) "
+                  "count as nodata; the first, %.7g m, is pixel (%lld, %lld)",
+                  info.range_exact ? "" : "at least ",
+                  static_cast<long long>(info.outliers),
+                  kLowestHeight,
+                  kHighestHeight,
+                  info.outlier_height,
+                  static_cast<long long>(info.outlier_column),
+                  static_cast<long long>(info.outlier_row));
+    std::string where;
+    if (info.has_geotransform) {
+        char at[160];
+        std::snprintf(at,
+                      sizeof at,
+                      info.geographic ? " at lon %.6f, lat %.6f" : " at x %.2f, y %.2f (%s)",
+                      g[0] + px * g[1] + py * g[2],
+                      g[3] + px * g[4] + py * g[5],
+                      info.crs_id.c_str());
+        where = at;
+    }
+    log::warn(info.path + text + where);
+}
+
 void check_likely_nodata(const DemInfo& info) {
     if (!info.likely_nodata || info.nodata_given) {
         return;
@@ -720,6 +755,12 @@ void check_likely_nodata(const DemInfo& info) {
 } // namespace
 
 double to_height(
+    double raw, const std::optional<double>& nodata, bool float32, double scale, double offset) {
+    const double h = sample_height(raw, nodata, float32, scale, offset);
+    return h >= kLowestHeight && h <= kHighestHeight ? h : NAN;
+}
+
+double sample_height(
     double raw, const std::optional<double>& nodata, bool float32, double scale, double offset) {
     if (!std::isfinite(raw)) {
         return NAN;
@@ -750,6 +791,7 @@ std::shared_ptr<const DemSource> DemSource::open(const std::vector<std::string>&
     for (const auto& path : paths) {
         infos.push_back(inspect_dem(path, kExactRangeSamples, nodata));
         check_likely_nodata(infos.back());
+        warn_outliers(infos.back());
         GDALDatasetUniquePtr ds(GDALDataset::Open(
             path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY, nullptr, nullptr, nullptr));
         if (!ds) {

@@ -59,6 +59,15 @@ struct SampleStats {
     double second_min = INFINITY, second_max = -INFINITY;
 };
 
+// What scan_band found: every sample that is not nodata (for undeclared voids, which may lie
+// outside the plausible range), the heights within it, and the outliers.
+struct BandStats {
+    SampleStats all, heights;
+    std::int64_t outliers = 0;
+    std::int64_t outlier_column = 0, outlier_row = 0;
+    double outlier_height = 0;
+};
+
 void add_sample(SampleStats& s, double h) {
     ++s.valid;
     if (h < s.min) {
@@ -82,7 +91,7 @@ void add_sample(SampleStats& s, double h) {
 // Reads band 1 (or, with `approx`, GDAL's sample overview of it, decimated to at most 16
 // Mpixel) strip by strip through to_height. A failed read is an IoError with GDAL's message:
 // truncated data, a missing VRT source, a file larger on paper than on disk.
-SampleStats scan_band(const DemInfo& info, GDALRasterBand& band, bool approx) {
+BandStats scan_band(const DemInfo& info, GDALRasterBand& band, bool approx) {
     constexpr double kApproxSamples = 4096.0 * 4096;
     GDALRasterBand* src = &band;
     if (approx) {
@@ -102,7 +111,7 @@ SampleStats scan_band(const DemInfo& info, GDALRasterBand& band, bool approx) {
     const bool float32 = band.GetRasterDataType() == GDT_Float32;
     const int rows = std::max(1, static_cast<int>(std::min<double>(out_h, (1 << 22) / out_w)));
     std::vector<double> buffer(static_cast<std::size_t>(out_w) * rows);
-    SampleStats stats;
+    BandStats stats;
     for (int y0 = 0; y0 < out_h; y0 += rows) {
         const int n = std::min(rows, out_h - y0);
         const int wy0 = static_cast<int>(static_cast<std::int64_t>(y0) * H / out_h);
@@ -124,9 +133,20 @@ SampleStats scan_band(const DemInfo& info, GDALRasterBand& band, bool approx) {
                           "); the file, or one it refers to, is damaged, truncated or missing");
         }
         for (std::size_t k = 0; k < static_cast<std::size_t>(out_w) * n; ++k) {
-            const double h = to_height(buffer[k], info.nodata, float32, info.scale, info.offset);
-            if (!std::isnan(h)) {
-                add_sample(stats, h);
+            const double h =
+                sample_height(buffer[k], info.nodata, float32, info.scale, info.offset);
+            if (std::isnan(h)) {
+                continue;
+            }
+            add_sample(stats.all, h);
+            if (h >= kLowestHeight && h <= kHighestHeight) {
+                add_sample(stats.heights, h);
+            } else if (stats.outliers++ == 0) {
+                const auto i = static_cast<std::int64_t>(k % static_cast<std::size_t>(out_w));
+                const auto j = y0 + static_cast<std::int64_t>(k / static_cast<std::size_t>(out_w));
+                stats.outlier_column = i * W / out_w;
+                stats.outlier_row = j * H / out_h;
+                stats.outlier_height = h;
             }
         }
     }
@@ -321,13 +341,19 @@ DemInfo inspect_dem(const std::string& path,
                   std::to_string(std::llround(samples / 1e6)) +
                   " Mpixel once for the exact height range");
     }
-    const SampleStats stats = scan_band(info, *band, approx);
-    if (stats.valid > 0) {
-        info.has_data = true;
-        info.min_height = stats.min;
-        info.max_height = stats.max;
-        find_likely_nodata(info, stats);
+    const BandStats stats = scan_band(info, *band, approx);
+    if (stats.all.valid > 0) {
+        find_likely_nodata(info, stats.all);
     }
+    if (stats.heights.valid > 0) {
+        info.has_data = true;
+        info.min_height = stats.heights.min;
+        info.max_height = stats.heights.max;
+    }
+    info.outliers = stats.outliers;
+    info.outlier_column = stats.outlier_column;
+    info.outlier_row = stats.outlier_row;
+    info.outlier_height = stats.outlier_height;
     return info;
 }
 

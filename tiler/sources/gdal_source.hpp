@@ -37,6 +37,12 @@ struct DemInfo {
     std::optional<double> likely_nodata;
     double likely_nodata_share = 0;
     double others_min = 0, others_max = 0;
+    // Samples outside kLowestHeight..kHighestHeight (counted as nodata), and the first one
+    // found (row by row): its pixel and height. Counted over every sample when range_exact,
+    // else over GDAL's approximate pass (a lower bound).
+    std::int64_t outliers = 0;
+    std::int64_t outlier_column = 0, outlier_row = 0;
+    double outlier_height = 0;
 };
 
 // An extreme value (the minimum or the maximum) of the valid samples is taken for undeclared
@@ -49,11 +55,21 @@ struct DemInfo {
 inline constexpr double kLikelyNodataShare = 0.005;
 inline constexpr double kLikelyNodataGap = 500;
 
-// The height of a raw sample of band 1, or NaN when it is nodata: NaN, +-Inf, or equal to
+// Heights outside this range (metres, after scale and offset) are no place on Earth: the
+// Challenger Deep lies near -11,000 m and Everest near 8,850 m. Such samples (+-3.4e38 left by
+// a conversion of an ASCII grid's inf, a spike of 3e38, undeclared markers out of range) count
+// as nodata, and one warning per source says how many and where the first lies.
+inline constexpr double kLowestHeight = -12000;
+inline constexpr double kHighestHeight = 9000;
+
+// The height of a raw sample of band 1, or NaN when it is nodata: NaN, +-Inf, equal to
 // `nodata` (compared as float32 too for Float32 bands, whose nodata is often written as a
-// double that is not exactly a float). Scale and offset are applied to the rest. This is the
-// one place that decides which source values are heights.
+// double that is not exactly a float), or outside kLowestHeight..kHighestHeight once scale and
+// offset are applied. This is the one place that decides which source values are heights.
 double to_height(
+    double raw, const std::optional<double>& nodata, bool float32, double scale, double offset);
+// The same without the range: what the sample says, NaN for nodata only.
+double sample_height(
     double raw, const std::optional<double>& nodata, bool float32, double scale, double offset);
 
 // Up to this many samples inspect_dem reads every block for the exact height range (about a
