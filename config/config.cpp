@@ -25,6 +25,7 @@ namespace fs = std::filesystem;
 constexpr int kMaxThreads = 256;
 constexpr long long kMaxCacheMb = 1 << 20; // 1 TiB: anything larger is a typo
 constexpr int kMaxQueueLimit = 100000;
+constexpr int kMaxWaitMs = 600000; // ten minutes
 constexpr int kMinTileSize = 2;
 constexpr int kMaxTileSize = 4096;
 constexpr double kMinEps = 0.001; // as tiler::check_eps
@@ -226,7 +227,8 @@ void parse_server(Checker& check, const json& value, ServerConfig& out) {
                       "log_level",
                       "queue_limit",
                       "metrics",
-                      "memory_mb"});
+                      "memory_mb",
+                      "start_wait_ms"});
     if (value.contains("host")) {
         if (auto s = check.string(value["host"], at + "/host")) {
             if (const auto problem = host_problem(*s)) {
@@ -262,6 +264,11 @@ void parse_server(Checker& check, const json& value, ServerConfig& out) {
             } else {
                 out.memory_mb = static_cast<std::size_t>(*mb);
             }
+        }
+    }
+    if (value.contains("start_wait_ms")) {
+        if (auto v = check.integer(value["start_wait_ms"], at + "/start_wait_ms", 1, kMaxWaitMs)) {
+            out.start_wait_ms = static_cast<int>(*v);
         }
     }
     if (value.contains("queue_limit")) {

@@ -17,6 +17,7 @@
 #include <cstdlib>
 
 #include <atomic>
+#include <chrono>
 #include <exception>
 #include <filesystem>
 #include <map>
@@ -344,6 +345,7 @@ int run(const Args& args) {
     tile_options.cache_bytes = cache_bytes;
     tile_options.threads = threads;
     tile_options.queue_limit = cfg.server.queue_limit;
+    tile_options.start_wait = std::chrono::milliseconds(cfg.server.start_wait_ms);
     server::TileService tiles(
         std::move(opened.served), tile_options, metrics, std::move(opened.unavailable));
 

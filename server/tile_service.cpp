@@ -31,6 +31,10 @@ constexpr int kGenerationNice = 10;
 // Default ceiling of TileServiceOptions::max_waiting (each waiter holds an HTTP thread).
 constexpr long long kMaxWaiting = 1024;
 
+// States of a queued generation: a request drops it when it has not started within
+// TileServiceOptions::start_wait.
+constexpr int kQueued = 0, kStarted = 1, kDropped = 2;
+
 // Bookkeeping bytes charged per cache entry on top of key and payload.
 constexpr std::size_t kEntryOverhead = 128;
 
@@ -246,6 +250,28 @@ struct TileService::Impl {
     int pending = 0; // generations queued or running
     int waiting = 0; // requests waiting for a generation
 
+    // Waits up to options.start_wait for `flight` (whose generation `job` this request leads)
+    // to finish, and true when it did or its generation has started by then. Otherwise drops
+    // the generation before it starts, answers its followers busy too, and returns false.
+    bool started_in_time(std::atomic<int>& job,
+                         const std::shared_future<std::shared_ptr<const Blob>>& flight,
+                         std::promise<std::shared_ptr<const Blob>>& promise,
+                         const std::string& key) {
+        if (flight.wait_for(options.start_wait) == std::future_status::ready) {
+            return true;
+        }
+        int queued = kQueued;
+        if (!job.compare_exchange_strong(queued, kDropped)) {
+            return true; // started meanwhile: its answer is coming
+        }
+        --metrics.queued_generations;
+        std::lock_guard<std::mutex> lock(flight_mutex);
+        --pending;
+        promise.set_value(nullptr);
+        flights.erase(key);
+        return false;
+    }
+
     ThreadPool pool; // last: destroyed (drained and joined) first
 };
 
@@ -402,7 +428,8 @@ std::shared_ptr<const Blob> TileService::tile(const std::string& layer_name,
         ++s.metrics.cache_misses;
         std::shared_future<std::shared_ptr<const Blob>> flight;
         std::shared_ptr<std::promise<std::shared_ptr<const Blob>>> promise;
-        bool entered_wait = false; // counted in s.waiting
+        std::shared_ptr<std::atomic<int>> job; // the queued generation this request leads
+        bool entered_wait = false;             // counted in s.waiting
         {
             std::lock_guard<std::mutex> lock(s.flight_mutex);
             const auto it = s.flights.find(key);
@@ -464,8 +491,13 @@ std::shared_ptr<const Blob> TileService::tile(const std::string& layer_name,
                     return nullptr;
                 }
                 ++s.metrics.queued_generations;
+                job = std::make_shared<std::atomic<int>>(kQueued);
                 s.pool.submit(
-                    [&s, served, &layer, store_key, in_store, key, promise, format, eps, id] {
+                    [&s, served, &layer, store_key, in_store, key, promise, format, eps, id, job] {
+                        int queued = kQueued;
+                        if (!job->compare_exchange_strong(queued, kStarted)) {
+                            return; // dropped (start_wait): its requests were answered busy
+                        }
                         --s.metrics.queued_generations;
                         ++s.metrics.in_flight_generations;
                         const auto start = std::chrono::steady_clock::now();
@@ -524,6 +556,10 @@ std::shared_ptr<const Blob> TileService::tile(const std::string& layer_name,
                 }
             }
         } leave{s, entered_wait};
+        if (job && !s.started_in_time(*job, flight, *promise, key)) {
+            ++s.metrics.queue_rejections;
+            return nullptr;
+        }
         blob = flight.get(); // rethrows the generation's InputError / IoError
         if (!blob) {
             ++s.metrics.queue_rejections;

@@ -14,6 +14,7 @@
 #include "tiler/stores/store.hpp"
 
 #include <atomic>
+#include <chrono>
 #include <cstddef>
 #include <functional>
 #include <memory>
@@ -51,6 +52,10 @@ struct TileServiceOptions {
     // same tile); past it they get 503 at once. 0: 2 x (threads + queue_limit), at most 1024.
     // Each waiting request holds an HTTP worker thread, so the server sizes its pool with it.
     int max_waiting = 0;
+    // How long a request waits for the generation it queued to start. Past it the generation is
+    // dropped, unstarted, and its requests get 503 (Retry-After) at once, rather than waiting
+    // behind the whole queue; one that has started is waited for.
+    std::chrono::milliseconds start_wait{1000};
 };
 
 // An immutable response payload with its strong validator, or a remembered failure.
@@ -105,7 +110,8 @@ public:
     const std::string& encoded(const Blob& blob, Coding coding);
 
     // The encoded tile, or nullptr when the generation queue or the requests waiting for
-    // generations are at their limit (answer 503; decided at once, without waiting). Throws
+    // generations are at their limit (answer 503; decided at once, without waiting), or when its
+    // generation could not start within options.start_wait (503 after that wait). Throws
     // NotFound for an unknown layer, a format the layer does not serve, or a tile with no data;
     // InputError for an id outside the scheme, an eps level the layer does not have (the same
     // message for every format), or an eps level asked of a format other than glb and drc.

@@ -29,11 +29,12 @@ TEST_CASE("SIGTERM during tile generation loses no request in flight and exits 0
     test::TempDir dir;
     // Tiles are meshed on the DEM's own pixels, so a fine DEM (1025 x 1025 over one degree, about
     // 720 x 720 pixels per z8 tile) with two generation threads makes eight cold tiles take a
-    // while: every request is in flight before the first ones are done.
+    // while: every request is in flight before the first ones are done. They all wait their
+    // turn (start_wait_ms), as this is about shutdown, not shedding load.
     test::write_dem(dir / "hills.asc", 1025);
     const std::string config = dir / "serve.json";
     test::write_file(config, R"({
-      "server": {"threads": 2, "log_level": "info"},
+      "server": {"threads": 2, "log_level": "info", "start_wait_ms": 600000},
       "layers": [{"name": "hills", "sources": ["hills.asc"], "tile_size": 512, "min_zoom": 5,
                   "max_zoom": 8, "eps_levels": [0.5, 1, 2, 4], "store": "tiles.sqlite"}]})");
     Child child;
