@@ -5,9 +5,11 @@
 #include "core/triangulate.hpp"
 #include "tiler/formats/encode.hpp"
 #include "tiler/formats/format.hpp"
+#include "tiler/mesh/mesh_text.hpp"
 #include "tiler/mesh/tile_mesh.hpp"
 #include "tiler/sources/gdal_source.hpp"
 #include "tiler/sources/tile_raster.hpp"
+#include "tiler/stores/atomic_file.hpp"
 #include "tiler/tile_grid.hpp"
 
 #include <memory>
@@ -195,20 +197,6 @@ core::Mesh mesh_tile(const TileRaster& raster,
                      int threads = 2,
                      bool check_error = true,
                      core::Effort effort = core::Effort::Balanced);
-
-// A mesh in grid coordinates as text: OBJ ("v column row height", 1-based "f i j k") or JSON
-// ({"vertices":[x,y,z,...],"triangles":[i,j,k,...]}, 0-based), heights as the float the mesher
-// used, widened to double and written with 17 significant digits, so a reader parsing doubles
-// gets exactly that float's value. The formats shared/bench's linf_check reads.
-std::string mesh_to_obj(const core::Mesh& mesh);
-std::string mesh_to_json(const core::Mesh& mesh);
-
-// Writes `bytes` to a temporary file next to `path`, then renames it over `path`, so a reader
-// never sees a half-written file. Throws IoError naming the path.
-void write_file_atomically(const std::string& path, std::string_view bytes);
-// The last step of such a write: renames the finished `temp` over `path`, removing `temp` and
-// throwing IoError naming `path` if that fails.
-void move_into_place(const std::string& temp, const std::string& path);
 
 VerticalDatum parse_datum(const std::string& name); // "auto" | "egm96" | "ellipsoid"
 const char* to_string(VerticalDatum datum);
