@@ -11,6 +11,7 @@
 #include "tiler/helper_threads.hpp"
 #include "tiler/log.hpp"
 #include "tiler/mesh/pixel_tile.hpp"
+#include "tiler/pyramid/layer_plan.hpp"
 #include "tiler/sources/gdal_source.hpp"
 #include "tiler/sources/geoid.hpp"
 #include "tiler/summary/dem_summary.hpp"
@@ -38,28 +39,6 @@ namespace {
 // see (fill_voids step 1 radius).
 constexpr int kFillMargin = 16;
 
-// Default eps at max_zoom: its sample spacing (at least the resolution) / 45, i.e. 2 m for
-// SRTM3 (~90 m) at the native zoom, scaling with the sample spacing like every level of the
-// ladder. 2 m is a third of SRTM's relative vertical
-// accuracy (about 6 m, 90% linear error) and four times its 1 m integer quantization, so the
-// mesh error stays well below the data's own noise while the meshes stay small; it is also
-// far below CesiumJS's level geometric error (77067 m / 2^z, about 75 m at SRTM3's z = 10).
-constexpr double kResolutionPerEps = 45.0;
-constexpr double kMinEps = 0.001;
-
-// CesiumJS's geometric error of a geodetic terrain level at zoom 0, metres: the equator's
-// length / 4 over a 65-sample tile, two tiles across (getLevelMaximumGeometricError).
-constexpr double kCesiumLevelError = 6378137.0 * 2 * 3.14159265358979323846 * 0.25 / (65 * 2);
-// The share of a zoom's reach (zoom_reach: how far its rough cells stray from flat) it is meshed
-// at, at least. Below it the mesher spends triangles on the lattice's planes to within an eps the
-// published bound cannot show, since the cells' own ranges dominate it: on N44W072 (SRTM 3")
-// the median glb tile of z7/z8/z9 falls from 13.8k/13.5k/37.6k triangles at the ladder to
-// 4.3k/4.5k/13.5k, and the median published bound rises from 215/94/41 m to 366/166/55 m.
-constexpr double kReachShare = 0.25;
-// The share of it globe terrain is meshed at, at least (see terrain_eps_for_zoom).
-constexpr double kTerrainLevelShare = 0.25;
-// The largest share of eps globe terrain keeps for sag (terrain_budget_at).
-constexpr double kTerrainSagMost = 0.75;
 // 3D Tiles terrain tiles wider than this (zoom 6 and coarser) carry float32 positions: the
 // 16-bit box is level at the tile's centre, and far from it a step of the box moves a vertex's
 // height (4.7 m a step at zoom 6, hundreds of metres on a hemisphere at zoom 0).
@@ -69,79 +48,83 @@ std::string tile_name(const TileId& id) {
     return std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
 }
 
+void validate_options(const LayerOptions& o) {
+    if (o.name.empty() || !std::all_of(o.name.begin(), o.name.end(), [](char c) {
+            return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-';
+        })) {
+        throw InputError("layer name '" + o.name +
+                         "': use letters, digits, '_' and '-' only (it goes into URLs)");
+    }
+    if (o.mesh_threads < 1 || o.mesh_threads > 64) {
+        throw InputError("layer '" + o.name + "': " + std::to_string(o.mesh_threads) +
+                         " threads per tile is outside 1..64");
+    }
+    if (o.tile_size < 2 || o.tile_size > 4096) {
+        throw InputError("layer '" + o.name + "': tile size " + std::to_string(o.tile_size) +
+                         " is outside 2..4096 samples");
+    }
+    for (const auto& z : {o.min_zoom, o.max_zoom}) {
+        if (z && (*z < 0 || *z > kMaxZoom)) {
+            throw InputError("layer '" + o.name + "': zoom " + std::to_string(*z) +
+                             " is outside 0.." + std::to_string(kMaxZoom));
+        }
+    }
+    if (o.min_zoom && o.max_zoom && *o.min_zoom > *o.max_zoom) {
+        throw InputError("layer '" + o.name + "': min zoom " + std::to_string(*o.min_zoom) +
+                         " is above max zoom " + std::to_string(*o.max_zoom));
+    }
+    if (o.finest_eps) {
+        check_eps(*o.finest_eps, "layer '" + o.name + "': finest eps");
+    }
+    for (double e : o.eps_levels) {
+        check_eps(e, "layer '" + o.name + "': eps level");
+    }
+}
+
+// The layer's sources, opened once its options are checked: georeferenced and holding data.
+std::shared_ptr<const DemSource> open_source(const LayerOptions& options) {
+    validate_options(options);
+    auto source = DemSource::open(options.sources, options.nodata);
+    const DemInfo& info = source->info();
+    if (!source->georeferenced()) {
+        throw InputError(info.path + ": has no georeferencing; tiles need a CRS and a "
+                                     "geotransform (terrabound mesh works without)");
+    }
+    if (!info.has_data) {
+        throw InputError(info.path + ": every sample of band 1 is nodata; there is nothing "
+                                     "to tile");
+    }
+    return source;
+}
+
 class DemLayer final : public Layer {
 public:
-    explicit DemLayer(const LayerOptions& options) : options_(options) {
-        validate_options();
-        source_ = DemSource::open(options_.sources, options_.nodata);
-        const DemInfo& info = source_->info();
-        if (!source_->georeferenced()) {
-            throw InputError(info.path + ": has no georeferencing; tiles need a CRS and a "
-                                         "geotransform (terrabound mesh works without)");
-        }
-        if (!info.has_data) {
-            throw InputError(info.path + ": every sample of band 1 is nodata; there is nothing "
-                                         "to tile");
-        }
-        footprint_ = source_->footprint();
-        pixels_ = source_->pixel_grid(options_.scheme);
-        summary_ok_ = pixels_ && summary_serves(*pixels_, options_.scheme);
-        datum_ = options_.datum;
-        if (datum_ == VerticalDatum::Auto) {
-            datum_ =
-                source_->ellipsoidal_heights() ? VerticalDatum::Ellipsoid : VerticalDatum::Egm96;
-        }
-        plan_zooms();
-        // The default scales with the sample spacing at max_zoom, which is coarser than the
-        // source's pixels when max_zoom is set below the native zoom.
-        const double pixels = std::max(
-            1.0, source_->pixels_per_sample(options_.scheme, max_zoom_, options_.tile_size));
-        finest_eps_ = options_.finest_eps
-                          ? *options_.finest_eps
-                          : std::max(kMinEps, info.resolution_m * pixels / kResolutionPerEps);
-        compute_height_range();
-    }
+    explicit DemLayer(const LayerOptions& options)
+        : options_(options), source_(open_source(options_)), plan_(options_, *source_) {}
 
     const LayerOptions& options() const override { return options_; }
-    int min_zoom() const override { return min_zoom_; }
-    int max_zoom() const override { return max_zoom_; }
-    // The ladder, finest_eps * 2^(max_zoom - z), raised where the summary shows a zoom's cells
-    // to be rougher than that (reach_share_of).
-    double eps_for_zoom(int z) const override {
-        const double ladder = finest_eps_ * std::ldexp(1.0, max_zoom_ - z);
-        if (!summary_ok_ || z < 0 || z >= max_zoom_ || zoom_source(z) == ZoomSource::Pixels) {
-            return ladder;
-        }
-        return std::max(ladder, kReachShare * reach()[static_cast<std::size_t>(z)]);
-    }
-    LonLatBox data_bounds() const override { return footprint_; }
-    TileRange tiles_at(int z) const override {
-        if (z < min_zoom_ || z > max_zoom_) {
-            return TileRange{z, 0, 0, -1, -1};
-        }
-        return tiles_covering(options_.scheme, footprint_, z);
-    }
-    bool may_have_tile(const TileId& id) const override {
-        if (!is_valid(options_.scheme, id)) {
-            return false;
-        }
-        const TileRange r = tiles_at(id.z);
-        return !r.empty() && id.x >= r.x0 && id.x <= r.x1 && id.y >= r.y0 && id.y <= r.y1;
-    }
+    int min_zoom() const override { return plan_.min_zoom(); }
+    int max_zoom() const override { return plan_.max_zoom(); }
+    double eps_for_zoom(int z) const override { return plan_.eps_for_zoom(z); }
+    double terrain_eps_for_zoom(int z) const override { return plan_.terrain_eps_for_zoom(z); }
+    LonLatBox data_bounds() const override { return plan_.footprint(); }
+    TileRange tiles_at(int z) const override { return plan_.tiles_at(z); }
+    bool may_have_tile(const TileId& id) const override { return plan_.may_have_tile(id); }
+    ZoomSource zoom_source(int z) const override { return plan_.zoom_source(z); }
 
     bool document(const std::string& path, std::string& out) const override {
         TilesetSpec spec;
         spec.layer = options_.name;
         spec.scheme = options_.scheme;
-        spec.min_zoom = min_zoom_;
-        spec.max_zoom = max_zoom_;
-        spec.data_bounds = footprint_;
-        spec.min_height = min_height_;
-        spec.max_height = max_height_;
+        spec.min_zoom = plan_.min_zoom();
+        spec.max_zoom = plan_.max_zoom();
+        spec.data_bounds = plan_.footprint();
+        spec.min_height = plan_.min_height();
+        spec.max_height = plan_.max_height();
         spec.eps_for_zoom = [this](int z) { return eps_for_zoom(z); };
         spec.tile_size = options_.tile_size;
         spec.has_tile = [this](const TileId& id) { return may_have_tile(id); };
-        spec.budget_for_zoom = [this](int z) { return budget_at(z, eps_for_zoom(z)); };
+        spec.budget_for_zoom = [this](int z) { return plan_.budget_at(z, eps_for_zoom(z)); };
         spec.error_for_tile = [this](const TileId& id) { return tile_error(id); };
         if (path == "layer.json") {
             if (options_.scheme != Scheme::Geodetic) {
@@ -192,17 +175,14 @@ public:
             spec, static_cast<int>(part[0]), static_cast<int>(part[1]), part[2], part[3], out);
     }
 
-    // The largest vertical distance between the geoid and any height of the DEM.
-    double relief() const {
-        return std::max(max_height_ - kGeoidLowest, kGeoidHighest - min_height_);
-    }
     // The bound a filler tile (on the geoid) publishes: the relief over the data, 0 where the
     // tile holds no source pixel.
     double filler_error(const TileId& id) const {
         const LonLatBox b = tile_bounds(Scheme::Geodetic, id);
-        const bool over_data = b.west < footprint_.east && b.east > footprint_.west &&
-                               b.south < footprint_.north && b.north > footprint_.south;
-        return over_data ? relief() : 0.0;
+        const bool over_data = b.west < plan_.footprint().east && b.east > plan_.footprint().west &&
+                               b.south < plan_.footprint().north &&
+                               b.north > plan_.footprint().south;
+        return over_data ? plan_.relief() : 0.0;
     }
 
     // What the terrain tileset publishes. Heights: every tile's vertices lie within the
@@ -213,13 +193,13 @@ public:
     TerrainTilesetSpec terrain_tileset_spec() const {
         TerrainTilesetSpec spec;
         spec.terrain = terrain_spec();
-        spec.min_height = std::min(min_height_, kGeoidLowest);
-        spec.max_height = std::max(max_height_, kGeoidHighest);
-        spec.root_error = relief() * std::exp2(std::max(terrain_min_zoom_ - 1, 0));
-        for (int z = terrain_min_zoom_; z <= max_zoom_; ++z) {
-            spec.root_error =
-                std::max(spec.root_error,
-                         terrain_budget_at(z, terrain_eps_for_zoom(z)).drawn_bound * std::exp2(z));
+        spec.min_height = std::min(plan_.min_height(), kGeoidLowest);
+        spec.max_height = std::max(plan_.max_height(), kGeoidHighest);
+        spec.root_error = plan_.relief() * std::exp2(std::max(plan_.terrain_min_zoom() - 1, 0));
+        for (int z = plan_.terrain_min_zoom(); z <= plan_.max_zoom(); ++z) {
+            spec.root_error = std::max(
+                spec.root_error,
+                plan_.terrain_budget_at(z, terrain_eps_for_zoom(z)).drawn_bound * std::exp2(z));
         }
         const double lo = spec.min_height, hi = spec.max_height;
         spec.bounds = [lo, hi](const TileId& id) {
@@ -240,7 +220,7 @@ public:
         }
         double value = 0;
         if (eps.level < 0) {
-            check_id(id);
+            plan_.check_id(id);
             value = eps_for_zoom(id.z);
         } else if (static_cast<std::size_t>(eps.level) < options_.eps_levels.size()) {
             value = options_.eps_levels[static_cast<std::size_t>(eps.level)];
@@ -272,7 +252,7 @@ public:
                 }
                 if (!meshed) {
                     try {
-                        check_id(id); // before eps_for_zoom: its message names the id
+                        plan_.check_id(id); // before eps_for_zoom: its message names the id
                         meshed = mesh_to_encode(id, eps_for_zoom(id.z));
                     } catch (const NotFound&) {
                         break; // no data here: no glb, no drc
@@ -321,47 +301,6 @@ public:
     TileRaster lattice_raster(const TileId& id) const;
     TileRaster summary_raster(const TileId& id) const;
     TileRaster raster_from(const TileId& id, const LatticeBlock& block) const;
-
-    // zoom_reach of every zoom 0..max_zoom - 1 (0 where a zoom reads pixels), made no smaller
-    // toward coarser zooms, so that eps never shrinks from one zoom to the next coarser one.
-    const std::vector<double>& reach() const {
-        std::call_once(reach_once_, [this] {
-            reach_.assign(static_cast<std::size_t>(max_zoom_) + 1, 0.0);
-            for (int z = max_zoom_ - 1; z >= 0; --z) {
-                const auto k = static_cast<std::size_t>(z);
-                if (zoom_source(z) != ZoomSource::Pixels) {
-                    reach_[k] =
-                        zoom_reach(summary(), *pixels_, options_.scheme, z, options_.tile_size);
-                }
-                reach_[k] = std::max(reach_[k], reach_[k + 1]);
-            }
-        });
-        return reach_;
-    }
-
-    // The summary kept on disk for this source and these settings, else made (and kept).
-    DemSummary load_or_make_summary() const {
-        const auto dir =
-            summary_dir_for(options_.summary_dir, std::int64_t{pixels_->width} * pixels_->height);
-        const auto key =
-            dir ? summary_key(options_.sources, options_.nodata, datum_, *pixels_) : std::nullopt;
-        if (!key) {
-            return DemSummary::build(*source_, *pixels_, datum_);
-        }
-        const auto path = summary_path(*dir, options_.sources.front(), *key);
-        if (auto kept = load_summary(path, *key)) {
-            return std::move(*kept);
-        }
-        DemSummary made = DemSummary::build(*source_, *pixels_, datum_);
-        save_summary(path, *key, made);
-        return made;
-    }
-
-    // The source's summary, made on first use (once, whichever thread asks first).
-    const DemSummary& summary() const {
-        std::call_once(summary_once_, [this] { summary_.emplace(load_or_make_summary()); });
-        return *summary_;
-    }
 
     std::string make_tile_at(const TileId& id, Format format, double eps) const override {
         if (is_terrain_format(format)) {
@@ -429,15 +368,16 @@ public:
     MeshedTile mesh_at(const TileId& id, double eps, bool drop_voids, bool check_error) const {
         check_eps(eps, "eps");
         if (drop_voids) {
-            check_id(id);
+            plan_.check_id(id);
         } else {
-            check_terrain_id(id);
+            plan_.check_terrain_id(id);
         }
         MeshedTile t;
-        t.budget = drop_voids ? budget_at(id.z, eps) : terrain_budget_at(id.z, eps);
+        t.budget = drop_voids ? plan_.budget_at(id.z, eps) : plan_.terrain_budget_at(id.z, eps);
         const ZoomSource from = zoom_source(id.z);
         if (from == ZoomSource::Pixels) {
-            PixelTile pixel = make_pixel_tile(*source_, *pixels_, options_.scheme, id, datum_);
+            PixelTile pixel =
+                make_pixel_tile(*source_, *plan_.pixels(), options_.scheme, id, plan_.datum());
             std::vector<std::uint8_t> valid;
             if (!drop_voids) {
                 valid = fill_for_terrain(pixel);
@@ -466,9 +406,9 @@ public:
         }
         if (from == ZoomSource::Summary) {
             // Every block of the summary under the tile, as the drawn tile must hold it.
-            const int level =
-                summary_level(summary(), *pixels_, options_.scheme, id.z, options_.tile_size);
-            t.cells = summary_cells(summary(), *pixels_, t.raster, level);
+            const int level = summary_level(
+                plan_.summary(), *plan_.pixels(), options_.scheme, id.z, options_.tile_size);
+            t.cells = summary_cells(plan_.summary(), *plan_.pixels(), t.raster, level);
             return t;
         }
         // Every valid source pixel under the tile, as the drawn tile must hold it.
@@ -476,35 +416,21 @@ public:
             CheckPoint c;
             lonlat_to_grid(t.raster, {p.lon, p.lat}, c.column, c.row);
             c.height =
-                p.height + (datum_ == VerticalDatum::Egm96 ? egm96_undulation(p.lon, p.lat) : 0.0);
+                p.height +
+                (plan_.datum() == VerticalDatum::Egm96 ? egm96_undulation(p.lon, p.lat) : 0.0);
             t.source_pixels.push_back(c);
         }
         return t;
     }
 
     Guarantee guarantee() const override {
-        return pixels_ ? Guarantee::SourcePixels : Guarantee::Measured;
-    }
-
-    ZoomSource zoom_source(int z) const override {
-        if (!pixels_) {
-            return ZoomSource::Lattice;
-        }
-        // As max_zoom is planned: the first zoom whose lattice is as fine as the pixels.
-        if (source_->pixels_per_sample(options_.scheme, z, options_.tile_size) <= 1 + 1e-9) {
-            return ZoomSource::Pixels;
-        }
-        if (summary_ok_ && pixels_per_step(*pixels_, options_.scheme, z, options_.tile_size) >=
-                               std::exp2(kFinestLevel)) {
-            return ZoomSource::Summary;
-        }
-        return ZoomSource::Lattice;
+        return plan_.pixels() ? Guarantee::SourcePixels : Guarantee::Measured;
     }
 
     double tile_error(const TileId& id) const override {
         const double eps = eps_for_zoom(id.z);
         if (zoom_source(id.z) == ZoomSource::Pixels) {
-            return budget_at(id.z, eps).drawn_bound;
+            return plan_.budget_at(id.z, eps).drawn_bound;
         }
         {
             std::lock_guard lock(measured_mutex_);
@@ -515,7 +441,7 @@ public:
         try {
             encode_at(id, Format::Glb, eps, false); // measures and records it
         } catch (const NotFound&) {
-            return budget_at(id.z, eps).drawn_bound;
+            return plan_.budget_at(id.z, eps).drawn_bound;
         }
         std::lock_guard lock(measured_mutex_);
         return measured_.at(id);
@@ -526,9 +452,9 @@ public:
         return over_eps_;
     }
 
-    double min_height() const override { return min_height_; }
-    double max_height() const override { return max_height_; }
-    VerticalDatum source_datum() const override { return datum_; }
+    double min_height() const override { return plan_.min_height(); }
+    double max_height() const override { return plan_.max_height(); }
+    VerticalDatum source_datum() const override { return plan_.datum(); }
     const DemSource& source() const override { return *source_; }
 
     LatticeBlock sample(Scheme scheme,
@@ -538,13 +464,13 @@ public:
                         std::int64_t row0,
                         int width,
                         int height) const override {
-        if (pixels_) {
+        if (plan_.pixels()) {
             const double pps = source_->pixels_per_sample(scheme, z, size);
             if (pps >= std::exp2(kFinestLevel)) {
-                const DemSummary& sum = summary();
+                const DemSummary& sum = plan_.summary();
                 return summary_lattice(sum,
-                                       *pixels_,
-                                       datum_,
+                                       *plan_.pixels(),
+                                       plan_.datum(),
                                        scheme,
                                        z,
                                        size,
@@ -629,9 +555,11 @@ private:
     }
 
     TerrainSpec terrain_spec() const {
-        return TerrainSpec{options_.name, terrain_min_zoom_, max_zoom_, footprint_, [this](int z) {
-                               return terrain_eps_for_zoom(z);
-                           }};
+        return TerrainSpec{options_.name,
+                           plan_.terrain_min_zoom(),
+                           plan_.max_zoom(),
+                           plan_.footprint(),
+                           [this](int z) { return terrain_eps_for_zoom(z); }};
     }
 
     // What a globe terrain tile's two formats (quantized-mesh and 3D Tiles terrain) share: the
@@ -654,13 +582,13 @@ private:
             throw InputError("tile " + tile_name(id) + ": outside the geodetic scheme (z 0.." +
                              std::to_string(kMaxZoom) + ", x below 2^(z+1), y below 2^z)");
         }
-        if (id.z > max_zoom_) {
+        if (id.z > plan_.max_zoom()) {
             throw NotFound("tile " + tile_name(id) + ": beyond layer '" + options_.name +
-                           "''s max zoom " + std::to_string(max_zoom_) +
+                           "''s max zoom " + std::to_string(plan_.max_zoom()) +
                            " (clients upsample its parent)");
         }
         const LonLatBox bounds = tile_bounds(options_.scheme, id);
-        if (terrain_has_data(id)) {
+        if (plan_.terrain_has_data(id)) {
             try {
                 return data_terrain(id, bounds);
             } catch (const NotFound&) {
@@ -690,7 +618,7 @@ private:
         // past its bound the worst samples become vertices (quantize_within). The border lines
         // keep the vertices the zoom's eps gave them, so neighbouring tiles still share them.
         const double eps = terrain_eps_for_zoom(id.z);
-        const double target = terrain_budget_at(id.z, eps).drawn_bound;
+        const double target = plan_.terrain_budget_at(id.z, eps).drawn_bound;
         TerrainDraft draft;
         MeshedTile& t = draft.meshed;
         t = mesh_at(id, eps, false, false); // quantize_within measures every valid sample
@@ -731,7 +659,7 @@ private:
                        : encode_terrain_glb(draft.tile);
         }
         const MeshedTile& t = draft.meshed;
-        const double target = terrain_budget_at(id.z, terrain_eps_for_zoom(id.z)).drawn_bound;
+        const double target = plan_.terrain_budget_at(id.z, terrain_eps_for_zoom(id.z)).drawn_bound;
         TerrainTile& tile = draft.tile;
         double drawn = draft.quantized; // what the encoded format draws, at every sample
         if (format == Format::Terrain3d) {
@@ -809,7 +737,7 @@ private:
         double step_x = 0, step_y = 0;
         bool degrees = scheme == Scheme::Geodetic;
         if (zoom_source(id.z) == ZoomSource::Pixels) {
-            const PixelGrid& g = *pixels_;
+            const PixelGrid& g = *plan_.pixels();
             degrees = g.lonlat;
             // A vertex in the pixel grid's units: lon/lat, or (mercator scheme) its native metres.
             const auto grid_xy = [&](std::size_t v) {
@@ -925,232 +853,6 @@ private:
         return out;
     }
 
-    void validate_options() {
-        const auto& o = options_;
-        if (o.name.empty() || !std::all_of(o.name.begin(), o.name.end(), [](char c) {
-                return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-';
-            })) {
-            throw InputError("layer name '" + o.name +
-                             "': use letters, digits, '_' and '-' only (it goes into URLs)");
-        }
-        if (o.mesh_threads < 1 || o.mesh_threads > 64) {
-            throw InputError("layer '" + o.name + "': " + std::to_string(o.mesh_threads) +
-                             " threads per tile is outside 1..64");
-        }
-        if (o.tile_size < 2 || o.tile_size > 4096) {
-            throw InputError("layer '" + o.name + "': tile size " + std::to_string(o.tile_size) +
-                             " is outside 2..4096 samples");
-        }
-        for (const auto& z : {o.min_zoom, o.max_zoom}) {
-            if (z && (*z < 0 || *z > kMaxZoom)) {
-                throw InputError("layer '" + o.name + "': zoom " + std::to_string(*z) +
-                                 " is outside 0.." + std::to_string(kMaxZoom));
-            }
-        }
-        if (o.min_zoom && o.max_zoom && *o.min_zoom > *o.max_zoom) {
-            throw InputError("layer '" + o.name + "': min zoom " + std::to_string(*o.min_zoom) +
-                             " is above max zoom " + std::to_string(*o.max_zoom));
-        }
-        if (o.finest_eps) {
-            check_eps(*o.finest_eps, "layer '" + o.name + "': finest eps");
-        }
-        for (double e : o.eps_levels) {
-            check_eps(e, "layer '" + o.name + "': eps level");
-        }
-    }
-
-    // max_zoom: the first zoom whose lattice spacing reaches the source's pixel size.
-    // min_zoom: the deepest zoom at which the data still spans at most 2 x 2 tiles.
-    void plan_zooms() {
-        int max_z = kMaxZoom;
-        for (int z = 0; z <= kMaxZoom; ++z) {
-            if (source_->pixels_per_sample(options_.scheme, z, options_.tile_size) <= 1.0 + 1e-9) {
-                max_z = z;
-                break;
-            }
-        }
-        if (options_.max_zoom) {
-            max_z = *options_.max_zoom;
-        }
-        int min_z = 0;
-        for (int z = 0; z <= max_z; ++z) {
-            if (tiles_covering(options_.scheme, footprint_, z).count() <= 4) {
-                min_z = z;
-            }
-        }
-        // Every zoom reads the full-resolution pixels under a tile (meshed on them, or checked
-        // against them), so a zoom whose tiles would hold more than kMaxPixelsPerTile is not
-        // offered.
-        int coarsest = 0;
-        // Zooms read from the summary read about their own number of samples, whatever the zoom.
-        while (coarsest <= max_z && zoom_source(coarsest) != ZoomSource::Summary &&
-               tile_pixels(coarsest) > kMaxPixelsPerTile) {
-            ++coarsest;
-        }
-        if (coarsest > max_z) {
-            throw InputError(
-                "layer '" + options_.name + "': a tile at max zoom " + std::to_string(max_z) +
-                " would hold " + std::to_string(std::llround(tile_pixels(max_z))) +
-                " source pixels, more than one tile reads (" +
-                std::to_string(std::llround(kMaxPixelsPerTile)) + "); set a finer max_zoom");
-        }
-        if (options_.min_zoom) {
-            min_z = *options_.min_zoom;
-            if (min_z < coarsest) {
-                throw InputError("layer '" + options_.name + "': min zoom " +
-                                 std::to_string(min_z) + ": its tiles would hold up to " +
-                                 std::to_string(std::llround(tile_pixels(min_z))) +
-                                 " source pixels, more than one tile reads at full resolution (" +
-                                 std::to_string(std::llround(kMaxPixelsPerTile)) +
-                                 "; every zoom is held to the full-resolution DEM); use min zoom " +
-                                 std::to_string(coarsest) + " or finer");
-            }
-        } else if (min_z < coarsest) {
-            log::info("layer '" + options_.name + "': starts at zoom " + std::to_string(coarsest) +
-                      " instead of " + std::to_string(min_z) +
-                      ": coarser tiles would hold more source pixels than one tile reads (" +
-                      std::to_string(std::llround(kMaxPixelsPerTile)) + ")");
-            min_z = coarsest;
-        }
-        if (min_z > max_z) {
-            throw InputError("layer '" + options_.name + "': min zoom " + std::to_string(min_z) +
-                             " is above max zoom " + std::to_string(max_z));
-        }
-        if (tiles_covering(options_.scheme, footprint_, max_z).empty()) {
-            throw InputError(source_->info().path + ": lies outside the " +
-                             to_string(options_.scheme) + " scheme's extent");
-        }
-        min_zoom_ = min_z;
-        // Globe terrain is meshed from the data from zoom 0 where the summary reaches that far
-        // (filler on the geoid below min_zoom otherwise, and where a tile holds no data).
-        terrain_min_zoom_ = summary_ok_ && !options_.min_zoom ? 0 : min_z;
-        max_zoom_ = max_z;
-    }
-
-    // Source pixels one tile of zoom z reads at most: its extent in pixels, clipped to the
-    // source's size.
-    double tile_pixels(int z) const {
-        const DemInfo& info = source_->info();
-        if (pixels_) {
-            // Exact for a pixel grid: the tile's width over the pixel's (a mercator tile spans
-            // no more latitude than longitude, and no more EPSG:3857 metres than its width).
-            const LonLatBox b = tile_bounds(options_.scheme, {z, 0, 0});
-            const double width = pixels_->lonlat ? b.east - b.west
-                                                 : lattice_x(options_.scheme, z, 1, 1) -
-                                                       lattice_x(options_.scheme, z, 1, 0);
-            return std::min<double>(width / pixels_->dx + 1, info.width) *
-                   std::min<double>(width / pixels_->dy + 1, info.height);
-        }
-        const double side = source_->pixels_per_sample(options_.scheme, z, options_.tile_size) *
-                                options_.tile_size +
-                            2;
-        return std::min<double>(side, info.width) * std::min<double>(side, info.height);
-    }
-
-    // Ellipsoidal range of every sample a tile can hold: the data's range, sea level where
-    // voids may be filled with it, plus the geoid's range over the footprint.
-    void compute_height_range() {
-        const DemInfo& info = source_->info();
-        double lo = info.min_height, hi = info.max_height;
-        if (!info.range_exact) {
-            // GDAL's approximate pass can miss the extremes, and a bounding volume that does
-            // not hold the surface makes clients cull tiles they should draw. Take in the
-            // Earth's whole relief instead (Challenger Deep to Everest, orthometric).
-            constexpr double kDeepest = -11100, kHighest = 8900;
-            log::warn(info.path + ": height range " + std::to_string(std::llround(lo)) + " .. " +
-                      std::to_string(std::llround(hi)) +
-                      " m is approximate (too large to read whole); tileset bounding volumes "
-                      "span " +
-                      std::to_string(std::llround(kDeepest)) + " .. " +
-                      std::to_string(std::llround(kHighest)) + " m instead");
-            lo = std::min(lo, kDeepest);
-            hi = std::max(hi, kHighest);
-        }
-        // Voids (nodata, or bounding-box corners of a projected DEM) may lie at 0 m orthometric.
-        if (info.nodata || !info.geographic) {
-            lo = std::min(lo, 0.0);
-            hi = std::max(hi, 0.0);
-        }
-        double n_lo = INFINITY, n_hi = -INFINITY;
-        constexpr int kSteps = 32;
-        for (int j = 0; j <= kSteps; ++j) {
-            for (int i = 0; i <= kSteps; ++i) {
-                const double lon =
-                    footprint_.west + (footprint_.east - footprint_.west) * i / kSteps;
-                const double lat =
-                    footprint_.south + (footprint_.north - footprint_.south) * j / kSteps;
-                const double n = egm96_undulation(lon, lat);
-                n_lo = std::min(n_lo, n), n_hi = std::max(n_hi, n);
-            }
-        }
-        // Between the probes the 15' geoid grid can vary a little more; 2 m covers it.
-        if (datum_ == VerticalDatum::Egm96) {
-            lo += n_lo - 2, hi += n_hi + 2;
-        } else if (info.nodata || !info.geographic) {
-            lo = std::min(lo, n_lo - 2), hi = std::max(hi, n_hi + 2);
-        }
-        min_height_ = lo - 1;
-        max_height_ = hi + 1;
-    }
-
-    // The eps globe terrain is meshed at: the ladder, or a share of CesiumJS's own level error
-    // where that is larger. CesiumJS picks quantized-mesh levels by its level error alone
-    // (kCesiumLevelError / 2^z), so a tile drawn closer than that costs bytes no view shows; and
-    // at coarse zooms straight triangles must follow the Earth's curve (the chord sag), which
-    // at the ladder's eps takes a full lattice of triangles (131,072 at zoom 0).
-    double terrain_eps_for_zoom(int z) const override {
-        return std::max(eps_for_zoom(z), kCesiumLevelError / std::exp2(z) * kTerrainLevelShare);
-    }
-
-    // Whether a globe terrain tile is meshed from the data (else filler on the geoid).
-    bool terrain_has_data(const TileId& id) const {
-        if (!is_valid(options_.scheme, id) || id.z < terrain_min_zoom_ || id.z > max_zoom_) {
-            return false;
-        }
-        const TileRange r = tiles_covering(options_.scheme, footprint_, id.z);
-        return !r.empty() && id.x >= r.x0 && id.x <= r.x1 && id.y >= r.y0 && id.y <= r.y1;
-    }
-
-    // check_id for a globe terrain tile meshed from the data.
-    void check_terrain_id(const TileId& id) const {
-        if (!terrain_has_data(id)) {
-            check_id(id); // names the problem
-            throw NotFound("tile " + tile_name(id) + ": no globe terrain data there");
-        }
-    }
-
-    void check_id(const TileId& id) const {
-        if (!is_valid(options_.scheme, id)) {
-            throw InputError("tile " + tile_name(id) + ": outside the " +
-                             to_string(options_.scheme) + " scheme (z 0.." +
-                             std::to_string(kMaxZoom) + ", x and y within the zoom's tiles)");
-        }
-        if (!may_have_tile(id)) {
-            throw NotFound("tile " + tile_name(id) + ": layer '" + options_.name +
-                           "' has no data there (zooms " + std::to_string(min_zoom_) + ".." +
-                           std::to_string(max_zoom_) + ")");
-        }
-    }
-
-    // The error budget of zoom z's tiles at eps: in source pixels for pixel tiles, in lattice
-    // samples otherwise (the longest edge must be the same for every tile of a zoom).
-    ErrorBudget budget_at(int z, double eps) const { return budget_with(z, eps, kSagShare); }
-    // The same for globe terrain (quantized-mesh and 3D Tiles terrain), which keeps its own
-    // share for sag (kTerrainSagShare).
-    // Where eps is far above the DEM's relief (coarse zooms, whose eps follows CesiumJS's level
-    // error), the mesher needs little of it: its share for sag grows up to kTerrainSagMost while
-    // the mesher keeps the relief plus an eighth, and the longer edges that allows follow the
-    // Earth's curve with fewer triangles (zoom 0 of N44W072: 14.7k triangles at a quarter).
-    ErrorBudget terrain_budget_at(int z, double eps) const {
-        const double spare = 1 - 1.0 / 8 - relief() / eps;
-        return budget_with(z, eps, std::max(kTerrainSagShare, std::min(kTerrainSagMost, spare)));
-    }
-    ErrorBudget budget_with(int z, double eps, double sag_share) const {
-        return zoom_source(z) == ZoomSource::Pixels
-                   ? pixel_error_budget(eps, options_.scheme, *pixels_, sag_share)
-                   : tile_error_budget(eps, options_.scheme, z, options_.tile_size, sag_share);
-    }
-
     // Records a measured tile's published error (tiles at the ladder's eps only: that is the
     // number its tileset carries), counting and logging those above eps.
     void note_measured(const TileId& id, double eps, const EncodeReport& report) const {
@@ -1174,25 +876,14 @@ private:
 
     LayerOptions options_;
     std::shared_ptr<const DemSource> source_;
-    std::optional<PixelGrid> pixels_;
-    bool summary_ok_ = false; // the summary serves this scheme's coarse zooms (summary_serves)
-    mutable std::once_flag summary_once_;
-    mutable std::optional<DemSummary> summary_;
-    mutable std::once_flag reach_once_;
-    mutable std::vector<double> reach_;
+    LayerPlan plan_;
     mutable std::mutex measured_mutex_;
     mutable std::map<TileId, double> measured_;
     mutable std::size_t over_eps_ = 0;
-    LonLatBox footprint_;
-    VerticalDatum datum_ = VerticalDatum::Egm96;
-    int min_zoom_ = 0, max_zoom_ = 0;
-    int terrain_min_zoom_ = 0;
-    double finest_eps_ = 1;
-    double min_height_ = 0, max_height_ = 0;
 };
 
 TileRaster DemLayer::make_raster(const TileId& id) const {
-    check_id(id);
+    plan_.check_id(id);
     return zoom_source(id.z) == ZoomSource::Summary ? summary_raster(id) : lattice_raster(id);
 }
 
@@ -1211,10 +902,11 @@ TileRaster DemLayer::summary_raster(const TileId& id) const {
     const int w = n + 1 + 2 * kFillMargin;
     const std::int64_t c0 = tile_first_column(scheme, id, n) - kFillMargin;
     const std::int64_t r0 = tile_first_row(scheme, id, n) - kFillMargin;
-    const DemSummary& sum = summary();
-    const int level = summary_level(sum, *pixels_, scheme, id.z, n);
+    const DemSummary& sum = plan_.summary();
+    const int level = summary_level(sum, *plan_.pixels(), scheme, id.z, n);
     return raster_from(
-        id, summary_lattice(sum, *pixels_, datum_, scheme, id.z, n, level, c0, r0, w, w));
+        id,
+        summary_lattice(sum, *plan_.pixels(), plan_.datum(), scheme, id.z, n, level, c0, r0, w, w));
 }
 
 TileRaster DemLayer::raster_from(const TileId& id, const LatticeBlock& block) const {
@@ -1235,7 +927,7 @@ TileRaster DemLayer::raster_from(const TileId& id, const LatticeBlock& block) co
     }
     // Fill voids in orthometric heights, so data-free areas sit on the geoid (sea level).
     std::vector<double> ortho = block.heights;
-    if (datum_ == VerticalDatum::Ellipsoid) {
+    if (plan_.datum() == VerticalDatum::Ellipsoid) {
         for (std::size_t k = 0; k < ortho.size(); ++k) {
             ortho[k] -= block.valid[k] ? undulation[k] : 0.0;
         }
@@ -1258,7 +950,7 @@ TileRaster DemLayer::raster_from(const TileId& id, const LatticeBlock& block) co
             const std::size_t t = static_cast<std::size_t>(j) * (n + 1) + i;
             const bool measured = block.valid[k] != 0;
             double h = ortho[k] + undulation[k];
-            if (datum_ == VerticalDatum::Ellipsoid && measured) {
+            if (plan_.datum() == VerticalDatum::Ellipsoid && measured) {
                 h = block.heights[k]; // the source's own ellipsoidal height, untouched
             }
             raster.grid.heights[t] = static_cast<float>(h);

@@ -1,0 +1,316 @@
+// A layer's pyramid plan (layer_plan.hpp): zoom range, eps ladder and reach, height range,
+// error budgets, and which tiles may hold data.
+#include "tiler/pyramid/layer_plan.hpp"
+
+#include "core/error.hpp"
+#include "tiler/formats/terrain_tiles.hpp"
+#include "tiler/log.hpp"
+#include "tiler/mesh/pixel_tile.hpp"
+#include "tiler/sources/geoid.hpp"
+#include "tiler/summary/layer_summary.hpp"
+#include "tiler/summary/summary_tile.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+namespace tb::tiler {
+namespace {
+
+// Default eps at max_zoom: its sample spacing (at least the resolution) / 45, i.e. 2 m for
+// SRTM3 (~90 m) at the native zoom, scaling with the sample spacing like every level of the
+// ladder. 2 m is a third of SRTM's relative vertical
+// accuracy (about 6 m, 90% linear error) and four times its 1 m integer quantization, so the
+// mesh error stays well below the data's own noise while the meshes stay small; it is also
+// far below CesiumJS's level geometric error (77067 m / 2^z, about 75 m at SRTM3's z = 10).
+constexpr double kResolutionPerEps = 45.0;
+
+// CesiumJS's geometric error of a geodetic terrain level at zoom 0, metres: the equator's
+// length / 4 over a 65-sample tile, two tiles across (getLevelMaximumGeometricError).
+constexpr double kCesiumLevelError = 6378137.0 * 2 * 3.14159265358979323846 * 0.25 / (65 * 2);
+// The share of a zoom's reach (zoom_reach: how far its rough cells stray from flat) it is meshed
+// at, at least. Below it the mesher spends triangles on the lattice's planes to within an eps the
+// published bound cannot show, since the cells' own ranges dominate it: on N44W072 (SRTM 3")
+// the median glb tile of z7/z8/z9 falls from 13.8k/13.5k/37.6k triangles at the ladder to
+// 4.3k/4.5k/13.5k, and the median published bound rises from 215/94/41 m to 366/166/55 m.
+constexpr double kReachShare = 0.25;
+// The share of it globe terrain is meshed at, at least (see terrain_eps_for_zoom).
+constexpr double kTerrainLevelShare = 0.25;
+// The largest share of eps globe terrain keeps for sag (terrain_budget_at).
+constexpr double kTerrainSagMost = 0.75;
+
+std::string tile_name(const TileId& id) {
+    return std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
+}
+
+} // namespace
+
+LayerPlan::LayerPlan(const LayerOptions& options, const DemSource& source)
+    : options_(options), source_(source) {
+    const DemInfo& info = source_.info();
+    footprint_ = source_.footprint();
+    pixels_ = source_.pixel_grid(options_.scheme);
+    summary_ok_ = pixels_ && summary_serves(*pixels_, options_.scheme);
+    datum_ = options_.datum;
+    if (datum_ == VerticalDatum::Auto) {
+        datum_ = source_.ellipsoidal_heights() ? VerticalDatum::Ellipsoid : VerticalDatum::Egm96;
+    }
+    plan_zooms();
+    // The default scales with the sample spacing at max_zoom, which is coarser than the
+    // source's pixels when max_zoom is set below the native zoom.
+    const double pixels =
+        std::max(1.0, source_.pixels_per_sample(options_.scheme, max_zoom_, options_.tile_size));
+    finest_eps_ = options_.finest_eps
+                      ? *options_.finest_eps
+                      : std::max(kMinEps, info.resolution_m * pixels / kResolutionPerEps);
+    compute_height_range();
+}
+
+// The ladder, finest_eps * 2^(max_zoom - z), raised where the summary shows a zoom's cells
+// to be rougher than that (kReachShare of its reach).
+double LayerPlan::eps_for_zoom(int z) const {
+    const double ladder = finest_eps_ * std::ldexp(1.0, max_zoom_ - z);
+    if (!summary_ok_ || z < 0 || z >= max_zoom_ || zoom_source(z) == ZoomSource::Pixels) {
+        return ladder;
+    }
+    return std::max(ladder, kReachShare * reach()[static_cast<std::size_t>(z)]);
+}
+
+// The eps globe terrain is meshed at: the ladder, or a share of CesiumJS's own level error
+// where that is larger. CesiumJS picks quantized-mesh levels by its level error alone
+// (kCesiumLevelError / 2^z), so a tile drawn closer than that costs bytes no view shows; and
+// at coarse zooms straight triangles must follow the Earth's curve (the chord sag), which
+// at the ladder's eps takes a full lattice of triangles (131,072 at zoom 0).
+double LayerPlan::terrain_eps_for_zoom(int z) const {
+    return std::max(eps_for_zoom(z), kCesiumLevelError / std::exp2(z) * kTerrainLevelShare);
+}
+
+ZoomSource LayerPlan::zoom_source(int z) const {
+    if (!pixels_) {
+        return ZoomSource::Lattice;
+    }
+    // As max_zoom is planned: the first zoom whose lattice is as fine as the pixels.
+    if (source_.pixels_per_sample(options_.scheme, z, options_.tile_size) <= 1 + 1e-9) {
+        return ZoomSource::Pixels;
+    }
+    if (summary_ok_ && pixels_per_step(*pixels_, options_.scheme, z, options_.tile_size) >=
+                           std::exp2(kFinestLevel)) {
+        return ZoomSource::Summary;
+    }
+    return ZoomSource::Lattice;
+}
+
+TileRange LayerPlan::tiles_at(int z) const {
+    if (z < min_zoom_ || z > max_zoom_) {
+        return TileRange{z, 0, 0, -1, -1};
+    }
+    return tiles_covering(options_.scheme, footprint_, z);
+}
+
+bool LayerPlan::may_have_tile(const TileId& id) const {
+    if (!is_valid(options_.scheme, id)) {
+        return false;
+    }
+    const TileRange r = tiles_at(id.z);
+    return !r.empty() && id.x >= r.x0 && id.x <= r.x1 && id.y >= r.y0 && id.y <= r.y1;
+}
+
+void LayerPlan::check_id(const TileId& id) const {
+    if (!is_valid(options_.scheme, id)) {
+        throw InputError("tile " + tile_name(id) + ": outside the " + to_string(options_.scheme) +
+                         " scheme (z 0.." + std::to_string(kMaxZoom) +
+                         ", x and y within the zoom's tiles)");
+    }
+    if (!may_have_tile(id)) {
+        throw NotFound("tile " + tile_name(id) + ": layer '" + options_.name +
+                       "' has no data there (zooms " + std::to_string(min_zoom_) + ".." +
+                       std::to_string(max_zoom_) + ")");
+    }
+}
+
+bool LayerPlan::terrain_has_data(const TileId& id) const {
+    if (!is_valid(options_.scheme, id) || id.z < terrain_min_zoom_ || id.z > max_zoom_) {
+        return false;
+    }
+    const TileRange r = tiles_covering(options_.scheme, footprint_, id.z);
+    return !r.empty() && id.x >= r.x0 && id.x <= r.x1 && id.y >= r.y0 && id.y <= r.y1;
+}
+
+void LayerPlan::check_terrain_id(const TileId& id) const {
+    if (!terrain_has_data(id)) {
+        check_id(id); // names the problem
+        throw NotFound("tile " + tile_name(id) + ": no globe terrain data there");
+    }
+}
+
+ErrorBudget LayerPlan::terrain_budget_at(int z, double eps) const {
+    const double spare = 1 - 1.0 / 8 - relief() / eps;
+    return budget_with(z, eps, std::max(kTerrainSagShare, std::min(kTerrainSagMost, spare)));
+}
+
+ErrorBudget LayerPlan::budget_with(int z, double eps, double sag_share) const {
+    return zoom_source(z) == ZoomSource::Pixels
+               ? pixel_error_budget(eps, options_.scheme, *pixels_, sag_share)
+               : tile_error_budget(eps, options_.scheme, z, options_.tile_size, sag_share);
+}
+
+double LayerPlan::relief() const {
+    return std::max(max_height_ - kGeoidLowest, kGeoidHighest - min_height_);
+}
+
+// zoom_reach of every zoom 0..max_zoom - 1 (0 where a zoom reads pixels), made no smaller
+// toward coarser zooms, so that eps never shrinks from one zoom to the next coarser one.
+const std::vector<double>& LayerPlan::reach() const {
+    std::call_once(reach_once_, [this] {
+        reach_.assign(static_cast<std::size_t>(max_zoom_) + 1, 0.0);
+        for (int z = max_zoom_ - 1; z >= 0; --z) {
+            const auto k = static_cast<std::size_t>(z);
+            if (zoom_source(z) != ZoomSource::Pixels) {
+                reach_[k] = zoom_reach(summary(), *pixels_, options_.scheme, z, options_.tile_size);
+            }
+            reach_[k] = std::max(reach_[k], reach_[k + 1]);
+        }
+    });
+    return reach_;
+}
+
+const DemSummary& LayerPlan::summary() const {
+    std::call_once(summary_once_, [this] {
+        summary_.emplace(load_or_make_summary(options_, source_, *pixels_, datum_));
+    });
+    return *summary_;
+}
+
+// max_zoom: the first zoom whose lattice spacing reaches the source's pixel size.
+// min_zoom: the deepest zoom at which the data still spans at most 2 x 2 tiles.
+void LayerPlan::plan_zooms() {
+    int max_z = kMaxZoom;
+    for (int z = 0; z <= kMaxZoom; ++z) {
+        if (source_.pixels_per_sample(options_.scheme, z, options_.tile_size) <= 1.0 + 1e-9) {
+            max_z = z;
+            break;
+        }
+    }
+    if (options_.max_zoom) {
+        max_z = *options_.max_zoom;
+    }
+    int min_z = 0;
+    for (int z = 0; z <= max_z; ++z) {
+        if (tiles_covering(options_.scheme, footprint_, z).count() <= 4) {
+            min_z = z;
+        }
+    }
+    // Every zoom reads the full-resolution pixels under a tile (meshed on them, or checked
+    // against them), so a zoom whose tiles would hold more than kMaxPixelsPerTile is not
+    // offered.
+    int coarsest = 0;
+    // Zooms read from the summary read about their own number of samples, whatever the zoom.
+    while (coarsest <= max_z && zoom_source(coarsest) != ZoomSource::Summary &&
+           tile_pixels(coarsest) > kMaxPixelsPerTile) {
+        ++coarsest;
+    }
+    if (coarsest > max_z) {
+        throw InputError(
+            "layer '" + options_.name + "': a tile at max zoom " + std::to_string(max_z) +
+            " would hold " + std::to_string(std::llround(tile_pixels(max_z))) +
+            " source pixels, more than one tile reads (" +
+            std::to_string(std::llround(kMaxPixelsPerTile)) + "); set a finer max_zoom");
+    }
+    if (options_.min_zoom) {
+        min_z = *options_.min_zoom;
+        if (min_z < coarsest) {
+            throw InputError("layer '" + options_.name + "': min zoom " + std::to_string(min_z) +
+                             ": its tiles would hold up to " +
+                             std::to_string(std::llround(tile_pixels(min_z))) +
+                             " source pixels, more than one tile reads at full resolution (" +
+                             std::to_string(std::llround(kMaxPixelsPerTile)) +
+                             "; every zoom is held to the full-resolution DEM); use min zoom " +
+                             std::to_string(coarsest) + " or finer");
+        }
+    } else if (min_z < coarsest) {
+        log::info("layer '" + options_.name + "': starts at zoom " + std::to_string(coarsest) +
+                  " instead of " + std::to_string(min_z) +
+                  ": coarser tiles would hold more source pixels than one tile reads (" +
+                  std::to_string(std::llround(kMaxPixelsPerTile)) + ")");
+        min_z = coarsest;
+    }
+    if (min_z > max_z) {
+        throw InputError("layer '" + options_.name + "': min zoom " + std::to_string(min_z) +
+                         " is above max zoom " + std::to_string(max_z));
+    }
+    if (tiles_covering(options_.scheme, footprint_, max_z).empty()) {
+        throw InputError(source_.info().path + ": lies outside the " + to_string(options_.scheme) +
+                         " scheme's extent");
+    }
+    min_zoom_ = min_z;
+    // Globe terrain is meshed from the data from zoom 0 where the summary reaches that far
+    // (filler on the geoid below min_zoom otherwise, and where a tile holds no data).
+    terrain_min_zoom_ = summary_ok_ && !options_.min_zoom ? 0 : min_z;
+    max_zoom_ = max_z;
+}
+
+// Source pixels one tile of zoom z reads at most: its extent in pixels, clipped to the
+// source's size.
+double LayerPlan::tile_pixels(int z) const {
+    const DemInfo& info = source_.info();
+    if (pixels_) {
+        // Exact for a pixel grid: the tile's width over the pixel's (a mercator tile spans
+        // no more latitude than longitude, and no more EPSG:3857 metres than its width).
+        const LonLatBox b = tile_bounds(options_.scheme, {z, 0, 0});
+        const double width = pixels_->lonlat ? b.east - b.west
+                                             : lattice_x(options_.scheme, z, 1, 1) -
+                                                   lattice_x(options_.scheme, z, 1, 0);
+        return std::min<double>(width / pixels_->dx + 1, info.width) *
+               std::min<double>(width / pixels_->dy + 1, info.height);
+    }
+    const double side =
+        source_.pixels_per_sample(options_.scheme, z, options_.tile_size) * options_.tile_size + 2;
+    return std::min<double>(side, info.width) * std::min<double>(side, info.height);
+}
+
+// Ellipsoidal range of every sample a tile can hold: the data's range, sea level where
+// voids may be filled with it, plus the geoid's range over the footprint.
+void LayerPlan::compute_height_range() {
+    const DemInfo& info = source_.info();
+    double lo = info.min_height, hi = info.max_height;
+    if (!info.range_exact) {
+        // GDAL's approximate pass can miss the extremes, and a bounding volume that does
+        // not hold the surface makes clients cull tiles they should draw. Take in the
+        // Earth's whole relief instead (Challenger Deep to Everest, orthometric).
+        constexpr double kDeepest = -11100, kHighest = 8900;
+        log::warn(info.path + ": height range " + std::to_string(std::llround(lo)) + " .. " +
+                  std::to_string(std::llround(hi)) +
+                  " m is approximate (too large to read whole); tileset bounding volumes "
+                  "span " +
+                  std::to_string(std::llround(kDeepest)) + " .. " +
+                  std::to_string(std::llround(kHighest)) + " m instead");
+        lo = std::min(lo, kDeepest);
+        hi = std::max(hi, kHighest);
+    }
+    // Voids (nodata, or bounding-box corners of a projected DEM) may lie at 0 m orthometric.
+    if (info.nodata || !info.geographic) {
+        lo = std::min(lo, 0.0);
+        hi = std::max(hi, 0.0);
+    }
+    double n_lo = INFINITY, n_hi = -INFINITY;
+    constexpr int kSteps = 32;
+    for (int j = 0; j <= kSteps; ++j) {
+        for (int i = 0; i <= kSteps; ++i) {
+            const double lon = footprint_.west + (footprint_.east - footprint_.west) * i / kSteps;
+            const double lat =
+                footprint_.south + (footprint_.north - footprint_.south) * j / kSteps;
+            const double n = egm96_undulation(lon, lat);
+            n_lo = std::min(n_lo, n), n_hi = std::max(n_hi, n);
+        }
+    }
+    // Between the probes the 15' geoid grid can vary a little more; 2 m covers it.
+    if (datum_ == VerticalDatum::Egm96) {
+        lo += n_lo - 2, hi += n_hi + 2;
+    } else if (info.nodata || !info.geographic) {
+        lo = std::min(lo, n_lo - 2), hi = std::max(hi, n_hi + 2);
+    }
+    min_height_ = lo - 1;
+    max_height_ = hi + 1;
+}
+
+} // namespace tb::tiler

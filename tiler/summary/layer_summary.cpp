@@ -1,0 +1,32 @@
+// Loading or making a layer's summary (layer_summary.hpp).
+#include "tiler/summary/layer_summary.hpp"
+
+#include "tiler/summary/summary_file.hpp"
+
+#include <cstdint>
+#include <optional>
+#include <utility>
+
+namespace tb::tiler {
+
+DemSummary load_or_make_summary(const LayerOptions& options,
+                                const DemSource& source,
+                                const PixelGrid& pixels,
+                                VerticalDatum datum) {
+    const auto dir =
+        summary_dir_for(options.summary_dir, std::int64_t{pixels.width} * pixels.height);
+    const auto key =
+        dir ? summary_key(options.sources, options.nodata, datum, pixels) : std::nullopt;
+    if (!key) {
+        return DemSummary::build(source, pixels, datum);
+    }
+    const auto path = summary_path(*dir, options.sources.front(), *key);
+    if (auto kept = load_summary(path, *key)) {
+        return std::move(*kept);
+    }
+    DemSummary made = DemSummary::build(source, pixels, datum);
+    save_summary(path, *key, made);
+    return made;
+}
+
+} // namespace tb::tiler
