@@ -1,33 +1,26 @@
-// A layer: DEM(s) -> tile raster -> core::triangulate -> encoded tile, plus the pyramid plan
-// (zoom range, eps ladder, tiles per zoom) shared by tile, build and serve.
+// A layer: DEM(s) -> tile raster -> core::triangulate -> encoded tile, shared by tile, build and
+// serve. The pyramid plan (zoom range, eps ladder, budgets, tiles per zoom) is LayerPlan
+// (tiler/pyramid/layer_plan.hpp), globe terrain is TerrainMaker (tiler/formats/terrain_maker.hpp).
 #include "tiler/layer.hpp"
 
 #include "core/error.hpp"
 #include "core/triangulate.hpp"
 #include "tiler/formats/encode.hpp"
 #include "tiler/formats/quantized_mesh.hpp"
-#include "tiler/formats/terrain_tiles.hpp"
+#include "tiler/formats/terrain_maker.hpp"
 #include "tiler/geodesy.hpp"
 #include "tiler/helper_threads.hpp"
 #include "tiler/log.hpp"
 #include "tiler/mesh/pixel_tile.hpp"
+#include "tiler/mesh/vertex_normals.hpp"
 #include "tiler/pyramid/layer_plan.hpp"
 #include "tiler/sources/gdal_source.hpp"
 #include "tiler/sources/geoid.hpp"
 #include "tiler/summary/dem_summary.hpp"
-#include "tiler/summary/summary_file.hpp"
 #include "tiler/summary/summary_tile.hpp"
 
-#include <unistd.h>
-
 #include <algorithm>
-#include <cerrno>
 #include <cmath>
-#include <cstdio>
-#include <cstring>
-#include <filesystem>
-#include <fstream>
-#include <limits>
 #include <map>
 #include <mutex>
 #include <sstream>
@@ -38,11 +31,6 @@ namespace {
 // Samples read around a tile so that void filling near its border sees what its neighbours
 // see (fill_voids step 1 radius).
 constexpr int kFillMargin = 16;
-
-// 3D Tiles terrain tiles wider than this (zoom 6 and coarser) carry float32 positions: the
-// 16-bit box is level at the tile's centre, and far from it a step of the box moves a vertex's
-// height (4.7 m a step at zoom 6, hundreds of metres on a hemisphere at zoom 0).
-constexpr double kExactPositionsDegrees = 2.0;
 
 std::string tile_name(const TileId& id) {
     return std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
@@ -100,7 +88,16 @@ std::shared_ptr<const DemSource> open_source(const LayerOptions& options) {
 class DemLayer final : public Layer {
 public:
     explicit DemLayer(const LayerOptions& options)
-        : options_(options), source_(open_source(options_)), plan_(options_, *source_) {}
+        : options_(options), source_(open_source(options_)), plan_(options_, *source_),
+          terrain_(
+              options_,
+              plan_,
+              *source_,
+              [this](const TileId& id, double eps) { return mesh_at(id, eps, false, false); },
+              [this] {
+                  std::lock_guard lock(measured_mutex_);
+                  ++over_eps_;
+              }) {}
 
     const LayerOptions& options() const override { return options_; }
     int min_zoom() const override { return plan_.min_zoom(); }
@@ -130,82 +127,13 @@ public:
             if (options_.scheme != Scheme::Geodetic) {
                 return false;
             }
-            out = terrain_layer_json(terrain_spec());
+            out = terrain_layer_json(terrain_.terrain_spec());
             return true;
         }
         if (path.rfind("terrain/", 0) == 0) {
-            return options_.scheme == Scheme::Geodetic && terrain_document(path.substr(8), out);
+            return options_.scheme == Scheme::Geodetic && terrain_.document(path.substr(8), out);
         }
         return tileset_document(spec, path, out);
-    }
-
-    // 3D Tiles terrain documents under terrain/: "tileset.json" and the subtrees
-    // "{root}/{level}/{x}/{y}.subtree".
-    bool terrain_document(const std::string& path, std::string& out) const {
-        const TerrainTilesetSpec spec = terrain_tileset_spec();
-        if (path == "tileset.json") {
-            out = terrain_tileset_json(spec);
-            return true;
-        }
-        constexpr std::string_view kSuffix = ".subtree";
-        if (path.size() <= kSuffix.size() ||
-            path.compare(path.size() - kSuffix.size(), kSuffix.size(), kSuffix) != 0) {
-            return false;
-        }
-        std::int64_t part[4] = {0, 0, 0, 0};
-        std::size_t at = 0;
-        const std::size_t end = path.size() - kSuffix.size();
-        for (int k = 0; k < 4; ++k) {
-            const std::size_t stop = k < 3 ? path.find('/', at) : end;
-            if (stop == std::string::npos || stop > end || stop == at || stop - at > 10) {
-                return false;
-            }
-            for (std::size_t c = at; c < stop; ++c) {
-                if (path[c] < '0' || path[c] > '9') {
-                    return false;
-                }
-                part[k] = part[k] * 10 + (path[c] - '0');
-            }
-            at = stop + 1;
-        }
-        if (part[0] > 1 || part[1] > kMaxZoom) {
-            return false;
-        }
-        return terrain_subtree(
-            spec, static_cast<int>(part[0]), static_cast<int>(part[1]), part[2], part[3], out);
-    }
-
-    // The bound a filler tile (on the geoid) publishes: the relief over the data, 0 where the
-    // tile holds no source pixel.
-    double filler_error(const TileId& id) const {
-        const LonLatBox b = tile_bounds(Scheme::Geodetic, id);
-        const bool over_data = b.west < plan_.footprint().east && b.east > plan_.footprint().west &&
-                               b.south < plan_.footprint().north &&
-                               b.north > plan_.footprint().south;
-        return over_data ? plan_.relief() : 0.0;
-    }
-
-    // What the terrain tileset publishes. Heights: every tile's vertices lie within the
-    // layer's range or on the geoid (filler, and the corners covering a rectangle beyond the
-    // DEM), whose undulation stays within kGeoidLowest..kGeoidHighest. Level errors: a tile at a
-    // meshed zoom is held to its zoom's bound (data_terrain measures what its glb draws); a filler
-    // tile over the data is as far from it as the DEM's heights are from the geoid.
-    TerrainTilesetSpec terrain_tileset_spec() const {
-        TerrainTilesetSpec spec;
-        spec.terrain = terrain_spec();
-        spec.min_height = std::min(plan_.min_height(), kGeoidLowest);
-        spec.max_height = std::max(plan_.max_height(), kGeoidHighest);
-        spec.root_error = plan_.relief() * std::exp2(std::max(plan_.terrain_min_zoom() - 1, 0));
-        for (int z = plan_.terrain_min_zoom(); z <= plan_.max_zoom(); ++z) {
-            spec.root_error = std::max(
-                spec.root_error,
-                plan_.terrain_budget_at(z, terrain_eps_for_zoom(z)).drawn_bound * std::exp2(z));
-        }
-        const double lo = spec.min_height, hi = spec.max_height;
-        spec.bounds = [lo, hi](const TileId& id) {
-            return terrain_tile_bounds(tile_bounds(Scheme::Geodetic, id), lo, hi);
-        };
-        return spec;
     }
 
     std::string make_tile(const TileId& id, Format format, EpsChoice eps) const override {
@@ -215,8 +143,8 @@ public:
                                  "': globe terrain tiles have only their zoom's eps "
                                  "(CesiumJS picks levels itself); drop ?eps");
             }
-            TerrainDraft draft = terrain_draft(id);
-            return encode_terrain(draft, id, format);
+            TerrainDraft draft = terrain_.draft(id);
+            return terrain_.encode(draft, id, format);
         }
         double value = 0;
         if (eps.level < 0) {
@@ -258,7 +186,7 @@ public:
                         break; // no data here: no glb, no drc
                     }
                     if (meshed->mesh.triangle_count() > 0) {
-                        normals = vertex_normals(*meshed, id);
+                        normals = normals_of(*meshed, id);
                     }
                 }
                 try {
@@ -275,13 +203,13 @@ public:
             }
             if (!draft) {
                 try {
-                    draft = terrain_draft(id);
+                    draft = terrain_.draft(id);
                 } catch (const NotFound&) {
                     break; // beyond the layer's max zoom: no terrain tile
                 }
             }
             try {
-                made[k] = encode_terrain(*draft, id, formats[k]);
+                made[k] = terrain_.encode(*draft, id, formats[k]);
             } catch (const NotFound&) {
                 // nothing this format can carry
             }
@@ -320,7 +248,7 @@ public:
         // made by encode_tile when it needs them: beside the lattice, when it has two threads.
         NormalsFn make_normals;
         if (with_normals && t.mesh.triangle_count() > 0) {
-            make_normals = [&] { return vertex_normals(t, id); };
+            make_normals = [&] { return normals_of(t, id); };
         }
         return encode_meshed(t, {}, id, format, eps, make_normals);
     }
@@ -485,372 +413,15 @@ public:
     }
 
 private:
-    // Fills the points of a line with no data (valid 0) linearly along the line between the
-    // nearest points with data, and marks every point valid. A line without data keeps its
-    // heights. A function of the line alone: two tiles that share the line fill it alike.
-    static void fill_line(std::vector<float>& heights, std::vector<std::uint8_t>& valid) {
-        const std::size_t n = heights.size();
-        std::size_t last = n; // the previous point with data
-        for (std::size_t k = 0; k <= n; ++k) {
-            if (k < n && !valid[k]) {
-                continue;
-            }
-            if (last == n && k < n) {
-                std::fill(
-                    heights.begin(), heights.begin() + static_cast<std::ptrdiff_t>(k), heights[k]);
-            } else if (last != n && k == n) {
-                std::fill(heights.begin() + static_cast<std::ptrdiff_t>(last + 1),
-                          heights.end(),
-                          heights[last]);
-            } else if (last != n) {
-                for (std::size_t i = last + 1; i < k; ++i) {
-                    const double t = static_cast<double>(i - last) / static_cast<double>(k - last);
-                    heights[i] = static_cast<float>((1 - t) * heights[last] + t * heights[k]);
-                }
-            }
-            last = k;
-        }
-        std::fill(valid.begin(), valid.end(), std::uint8_t{1});
-    }
-
-    // A pixel tile made ready to mesh its voids as data (see mesh_at): the voids of the block's
-    // outer rows and columns that lie on the tile's border lines (pixel centres on the line,
-    // which the tile beside has too), and of the border lines between pixels, filled along the
-    // line; the other voids keep their filled heights (those depend on the window read, which
-    // differs between tiles, but no other tile has them). Returns the block's valid mask.
-    static std::vector<std::uint8_t> fill_for_terrain(PixelTile& pixel) {
-        core::HeightGrid& g = pixel.raster.grid;
-        std::vector<std::uint8_t> valid;
-        valid.swap(g.valid);
-        if (!valid.empty()) {
-            const int w = g.width, h = g.height;
-            for (int s = 0; s < 4; ++s) {
-                if (pixel.sides[static_cast<std::size_t>(s)].present) {
-                    continue; // the line lies between pixels: its profile, below
-                }
-                const bool column = s == kWest || s == kEast;
-                const int fixed = s == kWest ? 0 : s == kEast ? w - 1 : s == kNorth ? 0 : h - 1;
-                const int n = column ? h : w;
-                std::vector<float> line(static_cast<std::size_t>(n));
-                std::vector<std::uint8_t> ok(static_cast<std::size_t>(n));
-                const auto at = [&](int k) {
-                    return column ? static_cast<std::size_t>(k) * w + fixed
-                                  : static_cast<std::size_t>(fixed) * w + k;
-                };
-                for (int k = 0; k < n; ++k) {
-                    line[static_cast<std::size_t>(k)] = g.heights[at(k)];
-                    ok[static_cast<std::size_t>(k)] = valid[at(k)];
-                }
-                fill_line(line, ok);
-                for (int k = 0; k < n; ++k) {
-                    g.heights[at(k)] = line[static_cast<std::size_t>(k)];
-                }
-            }
-        }
-        for (BorderProfile& side : pixel.sides) {
-            fill_line(side.heights, side.valid);
-        }
-        pixel.corner_valid.fill(1);
-        return valid;
-    }
-
-    TerrainSpec terrain_spec() const {
-        return TerrainSpec{options_.name,
-                           plan_.terrain_min_zoom(),
-                           plan_.max_zoom(),
-                           plan_.footprint(),
-                           [this](int z) { return terrain_eps_for_zoom(z); }};
-    }
-
-    // What a globe terrain tile's two formats (quantized-mesh and 3D Tiles terrain) share: the
-    // mesh, quantized, with its normals, or flat filler.
-    struct TerrainDraft {
-        TerrainTile tile;     // without what only one format carries
-        MeshedTile meshed;    // what it was made from (empty for filler)
-        double quantized = 0; // the quantized mesh's largest error at the samples, metres
-    };
-
-    // A globe terrain tile's content (tiler/formats/terrain_tiles.hpp): meshed from the DEM
-    // where the layer has data, flat filler on the geoid elsewhere at zooms up to max_zoom
-    // (CesiumJS never asks for a tile whose parent is missing).
-    TerrainDraft terrain_draft(const TileId& id) const {
-        if (options_.scheme != Scheme::Geodetic) {
-            throw InputError("layer '" + options_.name +
-                             "': globe terrain needs the geodetic scheme");
-        }
-        if (!is_valid(options_.scheme, id)) {
-            throw InputError("tile " + tile_name(id) + ": outside the geodetic scheme (z 0.." +
-                             std::to_string(kMaxZoom) + ", x below 2^(z+1), y below 2^z)");
-        }
-        if (id.z > plan_.max_zoom()) {
-            throw NotFound("tile " + tile_name(id) + ": beyond layer '" + options_.name +
-                           "''s max zoom " + std::to_string(plan_.max_zoom()) +
-                           " (clients upsample its parent)");
-        }
-        const LonLatBox bounds = tile_bounds(options_.scheme, id);
-        if (plan_.terrain_has_data(id)) {
-            try {
-                return data_terrain(id, bounds);
-            } catch (const NotFound&) {
-                // no source pixel centre lies in the tile: filler
-            }
-        }
-        const TileMesh filler = terrain_filler(bounds);
-        TerrainDraft draft;
-        TerrainTile& tile = draft.tile;
-        tile.filler = true;
-        tile.extras.normals.resize(filler.vertex_count());
-        for (std::size_t v = 0; v < filler.vertex_count(); ++v) {
-            tile.extras.normals[v] = up_vector(filler.x[v], filler.y[v]);
-        }
-        tile.extras.water_mask = {255};
-        tile.extras.metadata = terrain_metadata(terrain_spec(), id, 0, true);
-        tile.mesh = quantize_mesh(filler, bounds);
-        tile.glb_error = filler_error(id);
-        // Float positions: a 16-bit step of a coarse filler tile's box is tens of metres.
-        tile.exact_positions = true;
-        return draft;
-    }
-
-    TerrainDraft data_terrain(const TileId& id, const LonLatBox& bounds) const {
-        // The 15-bit quantization moves vertices by up to half a step (about 1/65534 of the
-        // tile) across the slope: it is measured at every sample, and where it takes the tile
-        // past its bound the worst samples become vertices (quantize_within). The border lines
-        // keep the vertices the zoom's eps gave them, so neighbouring tiles still share them.
-        const double eps = terrain_eps_for_zoom(id.z);
-        const double target = plan_.terrain_budget_at(id.z, eps).drawn_bound;
-        TerrainDraft draft;
-        MeshedTile& t = draft.meshed;
-        t = mesh_at(id, eps, false, false); // quantize_within measures every valid sample
-        if (t.mesh.triangle_count() == 0) {
-            throw NotFound("tile " + tile_name(id) + ": no triangle from the DEM"); // filler
-        }
-        cover_rectangle(t.mesh, bounds);
-        TerrainTile& tile = draft.tile;
-        std::size_t uncovered = 0;
-        double error = 0;
-        tile.mesh = quantize_within(t.mesh,
-                                    bounds,
-                                    t.raster,
-                                    t.source_pixels,
-                                    target - t.budget.sag,
-                                    error,
-                                    &uncovered,
-                                    t.cells);
-        if (uncovered > 0) {
-            log::debug("tile " + tile_name(id) + ": " + std::to_string(uncovered) +
-                       " sample(s) lie in no quantized triangle");
-        }
-        draft.quantized = error;
-        tile.error = std::max(error + t.budget.sag, target);
-        tile.extras.normals = vertex_normals(t, id);
-        return draft;
-    }
-
-    // The draft encoded as `format` (terrain or terrain3d), with what only that format carries,
-    // set on the draft itself: the water mask and metadata only quantized-mesh encodes, the
-    // positions and bound only the glb does, so one draft serves both formats in either order.
-    // The 3D Tiles glb's surface is measured at every sample: where its 16-bit positions would
-    // take it past the bound, it carries float32 positions instead.
-    std::string encode_terrain(TerrainDraft& draft, const TileId& id, Format format) const {
-        if (draft.tile.filler) {
-            return format == Format::Terrain
-                       ? encode_quantized_mesh(draft.tile.mesh, draft.tile.extras)
-                       : encode_terrain_glb(draft.tile);
-        }
-        const MeshedTile& t = draft.meshed;
-        const double target = plan_.terrain_budget_at(id.z, terrain_eps_for_zoom(id.z)).drawn_bound;
-        TerrainTile& tile = draft.tile;
-        double drawn = draft.quantized; // what the encoded format draws, at every sample
-        if (format == Format::Terrain3d) {
-            // 16-bit positions, unless they draw the tile further from the DEM than its bound
-            // (or, on a coarser lattice than the pixels, 5 % further than the quantized mesh
-            // itself: the lattice's own error dominates there), or the tile is so wide that a
-            // 16-bit step of its box moves heights at its far side by metres (the box is level
-            // at the tile's centre).
-            const LonLatBox b = tile_bounds(options_.scheme, id);
-            tile.exact_positions = b.east - b.west > kExactPositionsDegrees;
-            const auto measure = [&] {
-                return surface_error(terrain_glb_surface(tile.mesh, tile.exact_positions),
-                                     t.raster,
-                                     t.source_pixels,
-                                     nullptr,
-                                     t.cells);
-            };
-            drawn = measure();
-            if (!tile.exact_positions &&
-                drawn > std::max(target - t.budget.sag, draft.quantized * 1.05) + 1e-9) {
-                tile.exact_positions = true;
-                drawn = measure();
-            }
-            tile.glb_error = std::max(drawn + t.budget.sag, target);
-        } else {
-            tile.extras.water_mask = terrain_water_mask(t.raster, tile_bounds(options_.scheme, id));
-            tile.extras.metadata = terrain_metadata(terrain_spec(), id, tile.error, false);
-        }
-        if (drawn + t.budget.sag > target + 1e-9) {
-            // A zoom meshed on a lattice coarser than the pixels is expected to miss them by
-            // more than eps (its bound is what it measures); at the pixels' own zoom only the
-            // quantization can.
-            const bool pixels = zoom_source(id.z) == ZoomSource::Pixels;
-            log::write(pixels ? log::Level::Warn : log::Level::Debug,
-                       std::string("terrain tile ") + tile_name(id) + "." + extension(format) +
-                           (pixels ? ": quantization leaves it " : ": it is ") +
-                           std::to_string(drawn + t.budget.sag) +
-                           " m from the DEM, above the zoom's eps " + std::to_string(target) +
-                           " m; the tile itself publishes the larger bound");
-            std::lock_guard lock(measured_mutex_);
-            ++over_eps_;
-        }
-        return format == Format::Terrain ? encode_quantized_mesh(tile.mesh, tile.extras)
-                                         : encode_terrain_glb(tile);
-    }
-
-    // The ellipsoid's unit normal at lon/lat (degrees), ECEF.
-    static std::array<double, 3> up_vector(double lon, double lat) {
-        constexpr double kDeg = 3.14159265358979323846 / 180;
-        return {std::cos(lat * kDeg) * std::cos(lon * kDeg),
-                std::cos(lat * kDeg) * std::sin(lon * kDeg),
-                std::sin(lat * kDeg)};
-    }
-
-    // Unit ECEF normals of the DEM surface at each vertex, from the slope of the source's
-    // heights at the vertex's lon/lat: a pure function of where the vertex is and of the source,
-    // so a vertex two tiles share gets the same normal in both. Pixel layers: central
-    // differences one pixel either side on the bilinear surface of the source's pixels (voids
-    // left out of the weights); other layers: central differences on the zoom's lattice. The
-    // differences are taken in the grid's own units (degrees, or EPSG:3857 metres for a
-    // mercator grid) and turned into ground slopes with the ellipsoid's radii at the vertex.
-    std::vector<std::array<double, 3>> vertex_normals(const MeshedTile& t, const TileId& id) const {
-        constexpr double kDeg = 3.14159265358979323846 / 180;
-        constexpr double kA = 6378137.0, kE2 = 6.69437999014e-3;
-        const TileMesh& m = t.mesh;
-        const Scheme scheme = options_.scheme;
-        std::vector<std::array<double, 3>> out(m.vertex_count());
-        std::vector<LonLat> ll(m.vertex_count());
-        for (std::size_t v = 0; v < m.vertex_count(); ++v) {
-            ll[v] = native_to_lonlat(scheme, m.x[v], m.y[v]);
-        }
-        // Gradient (dh/dx, dh/dy) per vertex, as the height difference across two steps of
-        // step_x, step_y grid units; `degrees`: those units are degrees, else EPSG:3857 metres.
-        std::vector<double> gx(m.vertex_count()), gy(m.vertex_count());
-        double step_x = 0, step_y = 0;
-        bool degrees = scheme == Scheme::Geodetic;
-        if (zoom_source(id.z) == ZoomSource::Pixels) {
-            const PixelGrid& g = *plan_.pixels();
-            degrees = g.lonlat;
-            // A vertex in the pixel grid's units: lon/lat, or (mercator scheme) its native metres.
-            const auto grid_xy = [&](std::size_t v) {
-                return g.lonlat ? std::pair{ll[v].lon, ll[v].lat} : std::pair{m.x[v], m.y[v]};
-            };
-            const LonLatBox b = tile_bounds(scheme, id);
-            double west = b.west, north = b.north, east = b.east, south = b.south;
-            if (!g.lonlat) {
-                lonlat_to_native(scheme, {b.west, b.north}, west, north);
-                lonlat_to_native(scheme, {b.east, b.south}, east, south);
-            }
-            const auto col = [&g](double x) { return (x - g.x0) / g.dx - 0.5; };
-            const auto row = [&g](double y) { return (g.y0 - y) / g.dy - 0.5; };
-            // The tile and 3 pixels around it, the part inside the raster only: beyond it every
-            // pixel is nodata, which the lookups skip as they skip pixels off the window (a
-            // tile at the source's edge would otherwise fill megabytes with NaN).
-            const auto first_col = static_cast<std::int64_t>(std::floor(col(west))) - 3;
-            const auto first_row = static_cast<std::int64_t>(std::floor(row(north))) - 3;
-            const auto end_col = static_cast<std::int64_t>(std::ceil(col(east))) + 4;
-            const auto end_row = static_cast<std::int64_t>(std::ceil(row(south))) + 4;
-            const std::int64_t c0 = std::max<std::int64_t>(first_col, 0);
-            const std::int64_t r0 = std::max<std::int64_t>(first_row, 0);
-            const int w = static_cast<int>(
-                std::max<std::int64_t>(std::min<std::int64_t>(end_col, g.width) - c0, 0));
-            const int h = static_cast<int>(
-                std::max<std::int64_t>(std::min<std::int64_t>(end_row, g.height) - r0, 0));
-            const std::vector<double> px =
-                w > 0 && h > 0 ? source_->read_pixels(c0, r0, w, h) : std::vector<double>();
-            const auto bilinear = [&](double fc, double fr, double& value) {
-                const double ic = std::floor(fc), ir = std::floor(fr);
-                const double tc = fc - ic, tr = fr - ir;
-                double sum = 0, total = 0;
-                for (int k = 0; k < 4; ++k) {
-                    const std::int64_t c = static_cast<std::int64_t>(ic) + (k & 1) - c0;
-                    const std::int64_t r = static_cast<std::int64_t>(ir) + (k >> 1) - r0;
-                    if (c < 0 || r < 0 || c >= w || r >= h) {
-                        continue;
-                    }
-                    const double v = px[static_cast<std::size_t>(r * w + c)];
-                    const double weight = ((k & 1) ? tc : 1 - tc) * ((k >> 1) ? tr : 1 - tr);
-                    if (!std::isnan(v) && weight > 0) {
-                        sum += weight * v, total += weight;
-                    }
-                }
-                if (total <= 0) {
-                    return false;
-                }
-                value = sum / total;
-                return true;
-            };
-            step_x = g.dx, step_y = g.dy;
-            for (std::size_t v = 0; v < m.vertex_count(); ++v) {
-                const auto [x, y] = grid_xy(v);
-                const double fc = col(x), fr = row(y);
-                double e = 0, wst = 0, n = 0, s = 0;
-                gx[v] = bilinear(fc + 1, fr, e) && bilinear(fc - 1, fr, wst) ? (e - wst) : 0.0;
-                gy[v] = bilinear(fc, fr - 1, n) && bilinear(fc, fr + 1, s) ? (n - s) : 0.0;
-            }
-        } else {
-            const int n = options_.tile_size;
-            const std::int64_t c0 = tile_first_column(scheme, id, n) - 1;
-            const std::int64_t r0 = tile_first_row(scheme, id, n) - 1;
-            const int w = n + 3;
-            const LatticeBlock block = source_->sample(scheme, id.z, n, c0, r0, w, w);
-            TileRaster lattice;
-            lattice.id = id;
-            lattice.scheme = scheme;
-            lattice.size = n;
-            const GridFrame f = frame_of(lattice); // native units, the zoom's lattice
-            step_x = f.dx, step_y = f.dy;
-            const auto at = [&](int i, int j, double& value) {
-                if (i < 0 || j < 0 || i >= w || j >= w) {
-                    return false;
-                }
-                const std::size_t k = static_cast<std::size_t>(j) * w + static_cast<std::size_t>(i);
-                value = block.heights[k];
-                return block.valid[k] != 0;
-            };
-            for (std::size_t v = 0; v < m.vertex_count(); ++v) {
-                const int i = static_cast<int>(std::lround((m.x[v] - f.x0) / f.dx)) + 1;
-                const int j = static_cast<int>(std::lround((f.y0 - m.y[v]) / f.dy)) + 1;
-                double e = 0, wst = 0, nn = 0, s = 0;
-                gx[v] = at(i + 1, j, e) && at(i - 1, j, wst) ? (e - wst) : 0.0;
-                gy[v] = at(i, j - 1, nn) && at(i, j + 1, s) ? (nn - s) : 0.0;
-            }
-        }
-        for (std::size_t v = 0; v < m.vertex_count(); ++v) {
-            const double lon = ll[v].lon * kDeg, lat = ll[v].lat * kDeg;
-            const double sl = std::sin(lat), cl = std::cos(lat);
-            const double w2 = 1 - kE2 * sl * sl;
-            const double radius_lon = kA / std::sqrt(w2) * cl;               // metres per radian
-            const double radius_lat = kA * (1 - kE2) / (w2 * std::sqrt(w2)); // metres per radian
-            // Ground metres per grid unit: per degree, or per EPSG:3857 metre (x = a lon,
-            // y = a ln tan(pi/4 + lat/2), so dlon/dx = 1/a and dlat/dy = cos(lat)/a).
-            const double metres_x = degrees ? radius_lon * kDeg : radius_lon / kA;
-            const double metres_y = degrees ? radius_lat * kDeg : radius_lat * cl / kA;
-            const double de = gx[v] / (2 * step_x * std::max(metres_x, 1e-6));
-            const double dn = gy[v] / (2 * step_y * metres_y);
-            const std::array<double, 3> east{-std::sin(lon), std::cos(lon), 0};
-            const std::array<double, 3> north{-sl * std::cos(lon), -sl * std::sin(lon), cl};
-            const std::array<double, 3> up{cl * std::cos(lon), cl * std::sin(lon), sl};
-            std::array<double, 3> nv{};
-            double len = 0;
-            for (int k = 0; k < 3; ++k) {
-                nv[k] = up[k] - de * east[k] - dn * north[k];
-                len += nv[k] * nv[k];
-            }
-            for (double& c : nv) {
-                c /= std::sqrt(len);
-            }
-            out[v] = nv;
-        }
-        return out;
+    // The tile's vertex normals (tiler/mesh/vertex_normals.hpp).
+    std::vector<std::array<double, 3>> normals_of(const MeshedTile& t, const TileId& id) const {
+        const bool pixels = zoom_source(id.z) == ZoomSource::Pixels;
+        return vertex_normals(t.mesh,
+                              id,
+                              options_.scheme,
+                              options_.tile_size,
+                              *source_,
+                              pixels ? &*plan_.pixels() : nullptr);
     }
 
     // Records a measured tile's published error (tiles at the ladder's eps only: that is the
@@ -877,6 +448,7 @@ private:
     LayerOptions options_;
     std::shared_ptr<const DemSource> source_;
     LayerPlan plan_;
+    TerrainMaker terrain_;
     mutable std::mutex measured_mutex_;
     mutable std::map<TileId, double> measured_;
     mutable std::size_t over_eps_ = 0;
