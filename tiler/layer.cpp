@@ -16,6 +16,7 @@
 #include "tiler/pyramid/layer_plan.hpp"
 #include "tiler/sources/gdal_source.hpp"
 #include "tiler/sources/geoid.hpp"
+#include "tiler/sources/lattice_raster.hpp"
 #include "tiler/summary/dem_summary.hpp"
 #include "tiler/summary/summary_tile.hpp"
 
@@ -27,10 +28,6 @@
 
 namespace tb::tiler {
 namespace {
-
-// Samples read around a tile so that void filling near its border sees what its neighbours
-// see (fill_voids step 1 radius).
-constexpr int kFillMargin = 16;
 
 std::string tile_name(const TileId& id) {
     return std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
@@ -225,10 +222,9 @@ public:
 
     TileRaster make_raster(const TileId& id) const override;
     // The zoom's lattice sampled from the source (DemSource::sample), or read off the summary;
-    // either as a tile raster (raster_from: the datum applied, voids filled).
+    // either as a tile raster (lattice_tile_raster: the datum applied, voids filled).
     TileRaster lattice_raster(const TileId& id) const;
     TileRaster summary_raster(const TileId& id) const;
-    TileRaster raster_from(const TileId& id, const LatticeBlock& block) const;
 
     std::string make_tile_at(const TileId& id, Format format, double eps) const override {
         if (is_terrain_format(format)) {
@@ -462,78 +458,27 @@ TileRaster DemLayer::make_raster(const TileId& id) const {
 TileRaster DemLayer::lattice_raster(const TileId& id) const {
     const Scheme scheme = options_.scheme;
     const int n = options_.tile_size;
-    const int w = n + 1 + 2 * kFillMargin;
-    const std::int64_t c0 = tile_first_column(scheme, id, n) - kFillMargin;
-    const std::int64_t r0 = tile_first_row(scheme, id, n) - kFillMargin;
-    return raster_from(id, source_->sample(scheme, id.z, n, c0, r0, w, w));
+    const int w = n + 1 + 2 * kLatticeFillMargin;
+    const std::int64_t c0 = tile_first_column(scheme, id, n) - kLatticeFillMargin;
+    const std::int64_t r0 = tile_first_row(scheme, id, n) - kLatticeFillMargin;
+    return lattice_tile_raster(
+        id, source_->sample(scheme, id.z, n, c0, r0, w, w), scheme, n, plan_.datum());
 }
 
 TileRaster DemLayer::summary_raster(const TileId& id) const {
     const Scheme scheme = options_.scheme;
     const int n = options_.tile_size;
-    const int w = n + 1 + 2 * kFillMargin;
-    const std::int64_t c0 = tile_first_column(scheme, id, n) - kFillMargin;
-    const std::int64_t r0 = tile_first_row(scheme, id, n) - kFillMargin;
+    const int w = n + 1 + 2 * kLatticeFillMargin;
+    const std::int64_t c0 = tile_first_column(scheme, id, n) - kLatticeFillMargin;
+    const std::int64_t r0 = tile_first_row(scheme, id, n) - kLatticeFillMargin;
     const DemSummary& sum = plan_.summary();
     const int level = summary_level(sum, *plan_.pixels(), scheme, id.z, n);
-    return raster_from(
+    return lattice_tile_raster(
         id,
-        summary_lattice(sum, *plan_.pixels(), plan_.datum(), scheme, id.z, n, level, c0, r0, w, w));
-}
-
-TileRaster DemLayer::raster_from(const TileId& id, const LatticeBlock& block) const {
-    const Scheme scheme = options_.scheme;
-    const int n = options_.tile_size;
-    const int m = kFillMargin;
-    const int w = n + 1 + 2 * m;
-    const std::int64_t c0 = block.column0, r0 = block.row0;
-
-    // Undulation of every lattice point (the same for a point in every tile that holds it).
-    std::vector<double> undulation(block.heights.size());
-    for (int j = 0; j < w; ++j) {
-        const double y = lattice_y(scheme, id.z, n, r0 + j);
-        for (int i = 0; i < w; ++i) {
-            const LonLat p = native_to_lonlat(scheme, lattice_x(scheme, id.z, n, c0 + i), y);
-            undulation[static_cast<std::size_t>(j) * w + i] = egm96_undulation(p.lon, p.lat);
-        }
-    }
-    // Fill voids in orthometric heights, so data-free areas sit on the geoid (sea level).
-    std::vector<double> ortho = block.heights;
-    if (plan_.datum() == VerticalDatum::Ellipsoid) {
-        for (std::size_t k = 0; k < ortho.size(); ++k) {
-            ortho[k] -= block.valid[k] ? undulation[k] : 0.0;
-        }
-    }
-    fill_voids(ortho, block.valid, w, w, m, 0.0);
-
-    TileRaster raster;
-    raster.id = id;
-    raster.scheme = scheme;
-    raster.bounds = tile_bounds(scheme, id);
-    raster.size = n;
-    raster.grid.width = n + 1;
-    raster.grid.height = n + 1;
-    raster.grid.heights.resize(static_cast<std::size_t>(n + 1) * (n + 1));
-    std::vector<std::uint8_t> valid(raster.grid.heights.size());
-    bool all_valid = true;
-    for (int j = 0; j <= n; ++j) {
-        for (int i = 0; i <= n; ++i) {
-            const std::size_t k = static_cast<std::size_t>(j + m) * w + (i + m);
-            const std::size_t t = static_cast<std::size_t>(j) * (n + 1) + i;
-            const bool measured = block.valid[k] != 0;
-            double h = ortho[k] + undulation[k];
-            if (plan_.datum() == VerticalDatum::Ellipsoid && measured) {
-                h = block.heights[k]; // the source's own ellipsoidal height, untouched
-            }
-            raster.grid.heights[t] = static_cast<float>(h);
-            valid[t] = measured ? 1 : 0;
-            all_valid = all_valid && measured;
-        }
-    }
-    if (!all_valid) {
-        raster.grid.valid = std::move(valid);
-    }
-    return raster;
+        summary_lattice(sum, *plan_.pixels(), plan_.datum(), scheme, id.z, n, level, c0, r0, w, w),
+        scheme,
+        n,
+        plan_.datum());
 }
 
 } // namespace
