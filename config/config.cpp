@@ -292,6 +292,24 @@ void parse_server(Checker& check, const json& value, ServerConfig& out) {
     }
 }
 
+// "summary_dir": where the DEM's summary is kept between runs; "off", or a directory resolved
+// against the config's directory (made when first needed).
+void parse_summary_dir(Checker& check,
+                       const json& value,
+                       const std::string& at,
+                       const fs::path& base_dir,
+                       tiler::LayerOptions& o) {
+    if (!value.contains("summary_dir") || value["summary_dir"].is_null()) {
+        return;
+    }
+    const std::string p = at + "/summary_dir";
+    if (!value["summary_dir"].is_string() || value["summary_dir"].get<std::string>().empty()) {
+        check.error(p, "expected null, \"off\" or a directory, got " + show(value["summary_dir"]));
+    } else if (auto s = check.string(value["summary_dir"], p)) {
+        o.summary_dir = *s == "off" ? *s : resolve(base_dir, *s);
+    }
+}
+
 void parse_layer(Checker& check,
                  const json& value,
                  const std::string& at,
@@ -316,7 +334,8 @@ void parse_layer(Checker& check,
                       "dem_tile_size",
                       "dem_heights",
                       "nodata",
-                      "effort"});
+                      "effort",
+                      "summary_dir"});
     tiler::LayerOptions& o = out.options;
 
     if (!value.contains("name")) {
@@ -468,6 +487,7 @@ void parse_layer(Checker& check,
             o.nodata = v.get<double>();
         }
     }
+    parse_summary_dir(check, value, at, base_dir, o);
     if (value.contains("store") && !value["store"].is_null()) {
         const std::string p = at + "/store";
         if (!value["store"].is_string()) {

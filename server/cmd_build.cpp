@@ -133,6 +133,7 @@ int run(const Args& args) {
     if (auto v = args.get("effort")) {
         o.layer.effort = core::parse_effort(*v);
     }
+    o.layer.summary_dir = args.get("summary-dir").value_or("");
     if (auto v = args.get("bbox")) {
         o.bbox = parse_bbox(*v);
     }
@@ -229,6 +230,7 @@ const Command& build_command() {
               "LEVEL",
               "mesher effort: fast, balanced (default) or best; the same bound at each, best the "
               "fewest triangles"},
+             {"summary-dir", "DIR", kSummaryDirHelp},
              {"threads", "N", "worker threads (default: one per usable core)"},
              {"resume", "", "continue a build: same parameters, tiles already there are kept"},
              {"force", "", "delete the layer's existing tiles and documents first"},

@@ -271,6 +271,11 @@ config::Config load_serve_config(const Args& args) {
             layer.options.effort = effort;
         }
     }
+    if (auto v = args.get("summary-dir")) {
+        for (auto& layer : cfg.layers) {
+            layer.options.summary_dir = *v;
+        }
+    }
     log::Level level = log::Level::Info;
     if (log::parse_level(cfg.server.log_level, level)) {
         log::set_level(level);
@@ -408,6 +413,7 @@ const Command& serve_command() {
           {"effort",
            "LEVEL",
            "mesher effort of every layer (the config's effort): fast, balanced (default) or best"},
+          {"summary-dir", "DIR", kSummaryDirHelp},
           {"store",
            "PATH",
            "keep generated tiles in this store for every layer: a directory, or a file "

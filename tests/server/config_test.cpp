@@ -209,3 +209,26 @@ TEST_CASE("the example configs in config/ are valid") {
         }
     }
 }
+
+TEST_CASE("summary_dir: off, or a directory resolved against the config's; anything else is "
+          "named") {
+    TempDir dir;
+    write_file(dir / "a.asc", "");
+    const std::string path = dir / "site.json";
+    const auto parse = [&](const std::string& value) {
+        return tb::config::parse_config(
+            R"({"layers": [{"name": "a", "sources": ["a.asc"], "summary_dir": )" + value + "}]}",
+            path);
+    };
+    CHECK(parse("null").layers[0].options.summary_dir.empty());
+    CHECK(parse(R"("off")").layers[0].options.summary_dir == "off");
+    CHECK(parse(R"("cache/sums")").layers[0].options.summary_dir == dir / "cache/sums");
+    CHECK(parse(R"("/var/cache/tb")").layers[0].options.summary_dir == "/var/cache/tb");
+    for (const char* bad : {R"("")", "3", "[]"}) {
+        CAPTURE(bad);
+        CHECK_THROWS_WITH_AS(parse(bad),
+                             doctest::Contains("/layers/0/summary_dir: expected null, \"off\" or "
+                                               "a directory"),
+                             tb::InputError);
+    }
+}

@@ -190,8 +190,9 @@ TEST_CASE("terrabound serve replaces its own stored tiles when the eps changes, 
     const std::string second = serve_once(config("coarse.json", 40, "tiles"), dir / "coarse.log");
     const std::string log = test::read_file(dir / "coarse.log");
     INFO(log);
-    CHECK(log.find("holds tiles made with other settings (eps was [2, 1], now [80, 40]); "
-                   "removing them") != std::string::npos);
+    // Zoom 6's eps follows the hills' reach (a quarter of it) where that beats the ladder's 2.
+    CHECK(log.find("holds tiles made with other settings (eps was [") != std::string::npos);
+    CHECK(log.find(", 1], now [80, 40]); removing them") != std::string::npos);
     CHECK(second != first);
     CHECK(test::read_file(dir / "tiles" + url) == second);
 
@@ -215,7 +216,8 @@ TEST_CASE("terrabound serve replaces its own stored tiles when the eps changes, 
                       dir / "refused.log") == 2);
     const std::string why = test::read_file(dir / "refused.log");
     INFO(why);
-    CHECK(why.find("its tiles were made by terrabound build with other settings (eps was [2, 1], "
-                   "now [80, 40])") != std::string::npos);
+    CHECK(why.find("its tiles were made by terrabound build with other settings (eps was [") !=
+          std::string::npos);
+    CHECK(why.find(", 1], now [80, 40])") != std::string::npos);
     CHECK(why.find("serving") == std::string::npos);
 }
