@@ -8,6 +8,7 @@
 #include "tiler/cpus.hpp"
 #include "tiler/log.hpp"
 #include "tiler/pyramid/tile_settings.hpp"
+#include "tiler/sources/gdal_source.hpp"
 #include "tiler/stores/store.hpp"
 
 #include <pthread.h>
@@ -84,25 +85,17 @@ config::Config config_from_dems(const std::vector<std::string>& dems) {
     return cfg;
 }
 
-// GDAL's block cache, from its C API (gdal.h; GIntBig is long long). Declared here rather than
-// included: server/ keeps GDAL's headers out (STYLE.md), and tiler/ has no wrapper for it yet.
-extern "C" {
-void GDALSetCacheMax64(long long bytes);
-long long GDALGetCacheMax64();
-}
-
-// GDAL's block cache without a memory budget, MiB (GDAL's own default is 5 % of the RAM).
-constexpr std::size_t kDefaultGdalCacheMb = 64;
-
-// Splits the process's memory: GDAL's block cache gets a quarter of the budget (64 MiB without
-// one), the tile cache cache_mb capped to half of it, the rest is left to tile generation,
-// queues and connections. Sets GDAL's cache, logs the split in one line, and returns the tile
-// cache's bytes. Call before any DEM is read.
+// Splits the process's memory: GDAL's block cache gets a quarter of the budget (without one,
+// it stays as init_gdal left it: 64 MiB, or GDAL_CACHEMAX), the tile cache cache_mb capped to
+// half of it, the rest is left to tile generation, queues and connections. Sets GDAL's cache,
+// logs the split in one line, and returns the tile cache's bytes. Call before any DEM is read.
 std::size_t split_memory(const config::ServerConfig& server) {
     const std::size_t budget = server.memory_mb;
-    const std::size_t gdal_mb = budget ? budget / 4 : kDefaultGdalCacheMb;
+    const std::size_t gdal_mb = budget / 4;
     const std::size_t cache_mb = budget ? std::min(server.cache_mb, budget / 2) : server.cache_mb;
-    GDALSetCacheMax64(static_cast<long long>(gdal_mb) << 20);
+    if (budget) {
+        tiler::set_block_cache_mb(gdal_mb);
+    }
     std::string line = budget ? "memory: " + std::to_string(budget) + " MiB budget: tile cache "
                               : "memory: no budget (memory_mb): tile cache ";
     line += std::to_string(cache_mb) + " MiB";
@@ -110,7 +103,7 @@ std::size_t split_memory(const config::ServerConfig& server) {
         line += " (cache_mb " + std::to_string(server.cache_mb) + " capped to half the budget)";
     }
     // As GDAL has it now, so that the line shows what GDAL really uses.
-    line += ", GDAL block cache " + std::to_string(GDALGetCacheMax64() >> 20) + " MiB";
+    line += ", GDAL block cache " + std::to_string(tiler::block_cache_mb()) + " MiB";
     if (budget) {
         line += ", " + std::to_string(budget - cache_mb - gdal_mb) +
                 " MiB left for tile generation and connections";

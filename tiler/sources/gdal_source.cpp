@@ -189,7 +189,20 @@ void init_gdal() {
         CPLSetErrorHandler(quiet_error_handler);
         // Statistics must come from the data: never write .aux.xml next to a user's DEM.
         CPLSetConfigOption("GDAL_PAM_ENABLED", "NO");
+        if (CPLGetConfigOption("GDAL_CACHEMAX", nullptr) == nullptr) {
+            GDALSetCacheMax64(static_cast<GIntBig>(kDefaultBlockCacheMb) << 20);
+        }
     });
+}
+
+void set_block_cache_mb(std::size_t mb) {
+    init_gdal();
+    GDALSetCacheMax64(static_cast<GIntBig>(mb) << 20);
+}
+
+std::size_t block_cache_mb() {
+    init_gdal();
+    return static_cast<std::size_t>(GDALGetCacheMax64() >> 20);
 }
 
 DemInfo inspect_dem(const std::string& path,
