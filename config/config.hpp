@@ -32,8 +32,9 @@ struct ServerConfig {
     // The process's memory budget, MiB; 0: none. GDAL's block cache gets a quarter, and the tile
     // cache at most half (cache_mb is capped to it).
     std::size_t memory_mb = 0;
-    // How long a tile request waits for its generation to start; past it: 503 with Retry-After.
-    int start_wait_ms = 1000;
+    // How long a tile request waits for its generation to start; past it: 503 with Retry-After
+    // (TileServiceOptions::start_wait says why 10 s).
+    int start_wait_ms = 10000;
 };
 
 struct LayerConfig {

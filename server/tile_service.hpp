@@ -54,8 +54,11 @@ struct TileServiceOptions {
     int max_waiting = 0;
     // How long a request waits for the generation it queued to start. Past it the generation is
     // dropped, unstarted, and its requests get 503 (Retry-After) at once, rather than waiting
-    // behind the whole queue; one that has started is waited for.
-    std::chrono::milliseconds start_wait{1000};
+    // behind the whole queue; one that has started is waited for. 10 s by default: CesiumJS
+    // does not retry a 3D Tiles tile or subtree that got 503, so a shorter wait turns a viewer's
+    // first burst of cold tiles on a small server into holes (1 s failed the browser tests on 2
+    // busy cores).
+    std::chrono::milliseconds start_wait{10000};
 };
 
 // An immutable response payload with its strong validator, or a remembered failure.

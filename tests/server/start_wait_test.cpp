@@ -124,9 +124,9 @@ TEST_CASE("tile requests that cannot start generating within the wait get 503 at
     CHECK(test::metric(s.port, "tb_tiles_generated_total") <= 1 + ok + 1);
 }
 
-TEST_CASE("the config's server.start_wait_ms is 1..600000, 1000 by default") {
+TEST_CASE("the config's server.start_wait_ms is 1..600000, 10000 by default") {
     const std::string layers = R"(, "layers": [{"name": "a", "sources": ["/vsimem/x.tif"]}]})";
-    CHECK(config::parse_config(R"({"server": {})" + layers, "c.json").server.start_wait_ms == 1000);
+    CHECK(config::parse_config(R"({"server": {})" + layers, "c.json").server.start_wait_ms == 10000);
     CHECK(config::parse_config(R"({"server": {"start_wait_ms": 250})" + layers, "c.json")
               .server.start_wait_ms == 250);
     CHECK_THROWS_AS(config::parse_config(R"({"server": {"start_wait_ms": 0})" + layers, "c.json"),
