@@ -310,6 +310,25 @@ void parse_summary_dir(Checker& check,
     }
 }
 
+// "valid_range": [MIN, MAX] metres, MIN < MAX; heights outside count as nodata.
+void parse_valid_range(Checker& check,
+                       const json& value,
+                       const std::string& at,
+                       tiler::LayerOptions& o) {
+    if (!value.contains("valid_range")) {
+        return;
+    }
+    const json& v = value["valid_range"];
+    if (!v.is_array() || v.size() != 2 || !v[0].is_number() || !v[1].is_number() ||
+        !std::isfinite(v[0].get<double>()) || !std::isfinite(v[1].get<double>()) ||
+        !(v[0].get<double>() < v[1].get<double>())) {
+        check.error(at + "/valid_range",
+                    "expected [MIN, MAX] in metres with MIN < MAX, got " + show(v));
+        return;
+    }
+    o.valid_range = {v[0].get<double>(), v[1].get<double>()};
+}
+
 void parse_layer(Checker& check,
                  const json& value,
                  const std::string& at,
@@ -335,7 +354,8 @@ void parse_layer(Checker& check,
                       "dem_heights",
                       "nodata",
                       "effort",
-                      "summary_dir"});
+                      "summary_dir",
+                      "valid_range"});
     tiler::LayerOptions& o = out.options;
 
     if (!value.contains("name")) {
@@ -488,6 +508,7 @@ void parse_layer(Checker& check,
         }
     }
     parse_summary_dir(check, value, at, base_dir, o);
+    parse_valid_range(check, value, at, o);
     if (value.contains("store") && !value["store"].is_null()) {
         const std::string p = at + "/store";
         if (!value["store"].is_string()) {

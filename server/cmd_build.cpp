@@ -134,6 +134,9 @@ int run(const Args& args) {
         o.layer.effort = core::parse_effort(*v);
     }
     o.layer.summary_dir = args.get("summary-dir").value_or("");
+    if (auto v = args.get("valid-range")) {
+        o.layer.valid_range = tiler::parse_valid_range(*v, "build: --valid-range");
+    }
     if (auto v = args.get("bbox")) {
         o.bbox = parse_bbox(*v);
     }
@@ -231,6 +234,7 @@ const Command& build_command() {
               "mesher effort: fast, balanced (default) or best; the same bound at each, best the "
               "fewest triangles"},
              {"summary-dir", "DIR", kSummaryDirHelp},
+             {"valid-range", "MIN,MAX", kValidRangeHelp},
              {"threads", "N", "worker threads (default: one per usable core)"},
              {"resume", "", "continue a build: same parameters, tiles already there are kept"},
              {"force", "", "delete the layer's existing tiles and documents first"},

@@ -45,7 +45,7 @@ std::string describe(const tiler::DemInfo& d) {
     }
     if (d.outliers > 0) {
         out << "  outliers:    " << (d.range_exact ? "" : "at least ") << d.outliers
-            << " sample(s) outside " << tiler::kLowestHeight << " .. " << tiler::kHighestHeight
+            << " sample(s) outside " << d.valid_range.low << " .. " << d.valid_range.high
             << " m count as nodata (first: " << d.outlier_height << " m at pixel "
             << d.outlier_column << ", " << d.outlier_row << ")\n";
     }
@@ -114,7 +114,8 @@ std::string describe_zoom(const tiler::Layer& layer, int z) {
 std::string describe_pyramid(const std::string& path,
                              tiler::Scheme scheme,
                              std::optional<double> nodata,
-                             const std::string& summary_dir) {
+                             const std::string& summary_dir,
+                             const tiler::ValidRange& range) {
     std::ostringstream out;
     out.precision(6);
     std::shared_ptr<const tiler::Layer> layer;
@@ -124,6 +125,7 @@ std::string describe_pyramid(const std::string& path,
         options.scheme = scheme;
         options.nodata = nodata;
         options.summary_dir = summary_dir;
+        options.valid_range = range;
         layer = tiler::Layer::open(options);
     } catch (const InputError& e) {
         out << "  pyramid:     none (" << e.what() << ")\n";
@@ -174,12 +176,16 @@ int run(const Args& args) {
     if (args.has("nodata")) {
         nodata = args.get_double("nodata", 0);
     }
+    tiler::ValidRange range;
+    if (auto v = args.get("valid-range")) {
+        range = tiler::parse_valid_range(*v, "info: --valid-range");
+    }
+    const std::string summary_dir = args.get("summary-dir").value_or("");
     for (const auto& path : args.positional) {
-        std::fputs(describe(tiler::inspect_dem(path, tiler::kExactRangeSamples, nodata)).c_str(),
-                   stdout);
         std::fputs(
-            describe_pyramid(path, scheme, nodata, args.get("summary-dir").value_or("")).c_str(),
+            describe(tiler::inspect_dem(path, tiler::kExactRangeSamples, nodata, range)).c_str(),
             stdout);
+        std::fputs(describe_pyramid(path, scheme, nodata, summary_dir, range).c_str(), stdout);
     }
     return 0;
 }
@@ -193,7 +199,8 @@ const Command& info_command() {
          "Describe a DEM: size, CRS, data type, nodata, height range, resolution, pyramid.",
          {{"scheme", "NAME", "pyramid plan for geodetic (default) or mercator tiles"},
           {"nodata", "V", "raw sample value to treat as nodata, replacing the file's own"},
-          {"summary-dir", "DIR", kSummaryDirHelp}},
+          {"summary-dir", "DIR", kSummaryDirHelp},
+          {"valid-range", "MIN,MAX", kValidRangeHelp}},
          "The pyramid plan is what 'terrabound build' and 'serve' make of the DEM alone with\n"
          "default options: zoom range, tiles per zoom, each zoom's eps (metres), how that eps\n"
          "is made true at the DEM's own pixels (the guarantee), and what its tiles read: the\n"

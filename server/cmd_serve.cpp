@@ -269,6 +269,12 @@ config::Config load_serve_config(const Args& args) {
             layer.options.summary_dir = *v;
         }
     }
+    if (auto v = args.get("valid-range")) {
+        const auto range = tiler::parse_valid_range(*v, "serve: --valid-range");
+        for (auto& layer : cfg.layers) {
+            layer.options.valid_range = range;
+        }
+    }
     log::Level level = log::Level::Info;
     if (log::parse_level(cfg.server.log_level, level)) {
         log::set_level(level);
@@ -407,6 +413,7 @@ const Command& serve_command() {
            "LEVEL",
            "mesher effort of every layer (the config's effort): fast, balanced (default) or best"},
           {"summary-dir", "DIR", kSummaryDirHelp},
+          {"valid-range", "MIN,MAX", kValidRangeHelp},
           {"store",
            "PATH",
            "keep generated tiles in this store for every layer: a directory, or a file "

@@ -54,6 +54,9 @@ int run(const Args& args) {
         options.nodata = args.get_double("nodata", 0);
     }
     options.summary_dir = args.get("summary-dir").value_or("");
+    if (auto v = args.get("valid-range")) {
+        options.valid_range = tiler::parse_valid_range(*v, "tile: --valid-range");
+    }
     const auto layer = tiler::Layer::open(options);
     const double eps = args.has("eps") ? args.get_double("eps", 0) : layer->eps_for_zoom(id.z);
     tiler::check_eps(eps, "tile: --eps");
@@ -124,6 +127,7 @@ const Command& tile_command() {
               "mesher effort: fast, balanced (default) or best; the same bound at each, best the "
               "fewest triangles"},
              {"summary-dir", "DIR", kSummaryDirHelp},
+             {"valid-range", "MIN,MAX", kValidRangeHelp},
          },
          "Outputs: .glb (glTF + Draco, ECEF), .drc (Draco, local ENU), .obj (the mesh in the\n"
          "grid coordinates of the samples it was meshed on: v column row height, heights above\n"

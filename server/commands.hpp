@@ -17,6 +17,10 @@ inline constexpr const char* kSummaryDirHelp =
     "where the DEM's multi-resolution summary is kept between runs, or 'off' (default: "
     "$XDG_CACHE_HOME/terrabound or ~/.cache/terrabound, for DEMs of 16 Mpixel and more)";
 
+// --valid-range, as serve, build, tile and info take it (LayerOptions::valid_range).
+inline constexpr const char* kValidRangeHelp =
+    "heights outside MIN,MAX metres count as nodata (default -12000,9000)";
+
 const Command& serve_command();
 const Command& build_command();
 const Command& tile_command();

@@ -69,7 +69,7 @@ void validate_options(const LayerOptions& o) {
 // The layer's sources, opened once its options are checked: georeferenced and holding data.
 std::shared_ptr<const DemSource> open_source(const LayerOptions& options) {
     validate_options(options);
-    auto source = DemSource::open(options.sources, options.nodata);
+    auto source = DemSource::open(options.sources, options.nodata, options.valid_range);
     const DemInfo& info = source->info();
     if (!source->georeferenced()) {
         throw InputError(info.path + ": has no georeferencing; tiles need a CRS and a "

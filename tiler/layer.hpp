@@ -63,6 +63,8 @@ struct LayerOptions {
     // directory, "off", or empty for the default ($XDG_CACHE_HOME or ~/.cache, /terrabound) for
     // sources of 16 Mpixel and more.
     std::string summary_dir;
+    // Heights outside it are outliers, counted as nodata (--valid-range; sources/gdal_source.hpp).
+    ValidRange valid_range;
 };
 
 // How a layer makes its published error true at every valid pixel of the source.

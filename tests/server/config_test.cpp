@@ -232,3 +232,25 @@ TEST_CASE("summary_dir: off, or a directory resolved against the config's; anyth
                              tb::InputError);
     }
 }
+
+TEST_CASE("valid_range: [MIN, MAX] with MIN < MAX; anything else is named") {
+    TempDir dir;
+    write_file(dir / "a.asc", "");
+    const std::string path = dir / "site.json";
+    const auto parse = [&](const std::string& value) {
+        return tb::config::parse_config(
+            R"({"layers": [{"name": "a", "sources": ["a.asc"], "valid_range": )" + value + "}]}",
+            path);
+    };
+    const auto r = parse("[-500, 12000]").layers[0].options.valid_range;
+    CHECK(r.low == -500);
+    CHECK(r.high == 12000);
+    for (const char* bad : {"null", "[1]", "[5, 1]", "[1, 1]", R"(["a", 2])", "[1, 2, 3]"}) {
+        CAPTURE(bad);
+        CHECK_THROWS_WITH_AS(
+            parse(bad),
+            doctest::Contains(
+                "/layers/0/valid_range: expected [MIN, MAX] in metres with MIN < MAX"),
+            tb::InputError);
+    }
+}

@@ -95,6 +95,20 @@ TEST_CASE("to_height: NaN and +-Inf are nodata, like the nodata value; the rest 
     CHECK(std::isnan(to_height(-12001, none, false, 1, 0)));
     CHECK(std::isnan(to_height(3e38, none, true, 1, 0)));
     CHECK(to_height(-32000, none, false, 0.1, 0) == -3200);
+    // Another range (--valid-range): 9,500 m kept, 100 m refused.
+    const tb::tiler::ValidRange mars{-9000, 22000};
+    CHECK(to_height(9500, none, false, 1, 0, mars) == 9500);
+    CHECK(std::isnan(to_height(-9500, none, false, 1, 0, mars)));
+    const auto r = tb::tiler::parse_valid_range("-500,12000.5", "--valid-range");
+    CHECK(r.low == -500);
+    CHECK(r.high == 12000.5);
+    CHECK_FALSE(r.is_default());
+    for (const char* bad : {"", "5", "1,", ",2", "3,3", "4,1", "a,b", "1,2,3", "nan,5"}) {
+        CAPTURE(bad);
+        CHECK_THROWS_WITH_AS(tb::tiler::parse_valid_range(bad, "--valid-range"),
+                             doctest::Contains("expected MIN,MAX in metres"),
+                             tb::InputError);
+    }
 }
 
 TEST_CASE("outliers (+-3.4e38, a 3e38 spike) are nodata: one warning names them, the build "
@@ -119,7 +133,7 @@ TEST_CASE("outliers (+-3.4e38, a 3e38 spike) are nodata: one warning names them,
                       "build " + dem + " -o " + dir.file("out") + " --formats glb,terrain" +
                           " --threads 1 --json");
     REQUIRE_MESSAGE(b.code == 0, b.err);
-    CHECK(b.err.find("3 sample(s) outside the plausible range of Earth heights") !=
+    CHECK(b.err.find("3 sample(s) outside the plausible range of heights (-12000 .. 9000 m") !=
           std::string::npos);
     CHECK(b.err.find("pixel (7, 5)") != std::string::npos);
     check_json_numbers(nlohmann::json::parse(b.out));
@@ -138,6 +152,21 @@ TEST_CASE("outliers (+-3.4e38, a 3e38 spike) are nodata: one warning names them,
         ++headers;
     }
     CHECK(headers > 0);
+    // A wider range keeps the 3e38 spike out still, and records itself in the manifest.
+    const Run wide = run(dir,
+                         "build " + dem + " -o " + dir.file("wide") +
+                             " --formats glb --threads 1 --valid-range -12000,12000");
+    REQUIRE_MESSAGE(wide.code == 0, wide.err);
+    CHECK(wide.err.find("(-12000 .. 12000 m; --valid-range") != std::string::npos);
+    CHECK(slurp(dir.file("wide/terrain/build-manifest.json"))
+              .find("\"valid_range\": [-12000, 12000]") != std::string::npos);
+    CHECK(slurp(dir.file("out/terrain/build-manifest.json")).find("valid_range") ==
+          std::string::npos);
+    const Run narrow = run(dir, "info " + dem + " --valid-range 0,300");
+    REQUIRE_MESSAGE(narrow.code == 0, narrow.err);
+    CHECK(narrow.out.find("outliers:    ") != std::string::npos);
+    CHECK(narrow.out.find("sample(s) outside 0 .. 300 m") != std::string::npos);
+    CHECK(run(dir, "info " + dem + " --valid-range 5,1").code == 2);
 }
 
 TEST_CASE("+-Inf samples are nodata: info shows a finite range and build writes valid JSON") {

@@ -51,6 +51,11 @@ Manifest tile_settings(const Layer& layer) {
     // Before eps, which follows the data (the reach of rough zooms): a resume refused over a
     // changed --nodata names nodata, not the eps it moved.
     m.emplace_back("nodata", o.nodata ? json_number(*o.nodata, "--nodata") : "null");
+    if (!o.valid_range.is_default()) { // absent by default, so older manifests stay equal
+        m.emplace_back("valid_range",
+                       "[" + json_number(o.valid_range.low) + ", " +
+                           json_number(o.valid_range.high) + "]");
+    }
     std::string eps = "[";
     for (int z = layer.min_zoom(); z <= layer.max_zoom(); ++z) {
         eps += (z > layer.min_zoom() ? ", " : "") + json_number(layer.eps_for_zoom(z));

@@ -329,8 +329,12 @@ private:
 
     // Height of a raw sample, or NaN for nodata (tiler::to_height decides).
     double to_height(double raw) const {
-        return tiler::to_height(
-            raw, info_.nodata, data_type_ == GDT_Float32, info_.scale, info_.offset);
+        return tiler::to_height(raw,
+                                info_.nodata,
+                                data_type_ == GDT_Float32,
+                                info_.scale,
+                                info_.offset,
+                                info_.valid_range);
     }
 
     std::string open_name_;
@@ -709,12 +713,13 @@ void warn_outliers(const DemInfo& info) {
     char text[512];
     std::snprintf(text,
                   sizeof text,
-                  ": %s%lld sample(s) outside the plausible range of Earth heights (%g .. %g m) "
-                  "count as nodata; the first, %.7g m, is pixel (%lld, %lld)",
+                  ": %s%lld sample(s) outside the plausible range of heights (%g .. %g m; "
+                  "--valid-range MIN,MAX to change it) count as nodata; the first, %.7g m, is "
+                  "pixel (%lld, %lld)",
                   info.range_exact ? "" : "at least ",
                   static_cast<long long>(info.outliers),
-                  kLowestHeight,
-                  kHighestHeight,
+                  info.valid_range.low,
+                  info.valid_range.high,
                   info.outlier_height,
                   static_cast<long long>(info.outlier_column),
                   static_cast<long long>(info.outlier_row));
@@ -754,10 +759,33 @@ void check_likely_nodata(const DemInfo& info) {
 
 } // namespace
 
-double to_height(
-    double raw, const std::optional<double>& nodata, bool float32, double scale, double offset) {
+double to_height(double raw,
+                 const std::optional<double>& nodata,
+                 bool float32,
+                 double scale,
+                 double offset,
+                 const ValidRange& range) {
     const double h = sample_height(raw, nodata, float32, scale, offset);
-    return h >= kLowestHeight && h <= kHighestHeight ? h : NAN;
+    return h >= range.low && h <= range.high ? h : NAN;
+}
+
+ValidRange parse_valid_range(const std::string& text, const std::string& what) {
+    const auto comma = text.find(',');
+    ValidRange r;
+    char* end = nullptr;
+    bool ok = comma != std::string::npos;
+    if (ok) {
+        const std::string low = text.substr(0, comma), high = text.substr(comma + 1);
+        r.low = std::strtod(low.c_str(), &end);
+        ok = !low.empty() && *end == '\0';
+        r.high = std::strtod(high.c_str(), &end);
+        ok = ok && !high.empty() && *end == '\0';
+    }
+    if (!ok || !std::isfinite(r.low) || !std::isfinite(r.high) || !(r.low < r.high)) {
+        throw InputError(what + " '" + text +
+                         "': expected MIN,MAX in metres with MIN < MAX, such as -12000,9000");
+    }
+    return r;
 }
 
 double sample_height(
@@ -778,7 +806,8 @@ double sample_height(
 }
 
 std::shared_ptr<const DemSource> DemSource::open(const std::vector<std::string>& paths,
-                                                 std::optional<double> nodata) {
+                                                 std::optional<double> nodata,
+                                                 const ValidRange& range) {
     init_gdal();
     if (paths.empty()) {
         throw InputError("no DEM given; name at least one raster file");
@@ -789,7 +818,7 @@ std::shared_ptr<const DemSource> DemSource::open(const std::vector<std::string>&
     }
     std::vector<DemInfo> infos;
     for (const auto& path : paths) {
-        infos.push_back(inspect_dem(path, kExactRangeSamples, nodata));
+        infos.push_back(inspect_dem(path, kExactRangeSamples, nodata, range));
         check_likely_nodata(infos.back());
         warn_outliers(infos.back());
         GDALDatasetUniquePtr ds(GDALDataset::Open(
@@ -856,7 +885,7 @@ std::shared_ptr<const DemSource> DemSource::open(const std::vector<std::string>&
         throw IoError(names + ": GDAL gave no VRT description of the mosaic");
     }
     const std::string open_name = xml[0];
-    DemInfo info = inspect_dem(open_name, kExactRangeSamples, nodata);
+    DemInfo info = inspect_dem(open_name, kExactRangeSamples, nodata, range);
     info.path = names;
     check_likely_nodata(info);
     return std::make_shared<GdalDemSource>(open_name, std::move(info));

@@ -139,7 +139,7 @@ BandStats scan_band(const DemInfo& info, GDALRasterBand& band, bool approx) {
                 continue;
             }
             add_sample(stats.all, h);
-            if (h >= kLowestHeight && h <= kHighestHeight) {
+            if (h >= info.valid_range.low && h <= info.valid_range.high) {
                 add_sample(stats.heights, h);
             } else if (stats.outliers++ == 0) {
                 const auto i = static_cast<std::int64_t>(k % static_cast<std::size_t>(out_w));
@@ -207,7 +207,8 @@ std::size_t block_cache_mb() {
 
 DemInfo inspect_dem(const std::string& path,
                     double exact_range_samples,
-                    std::optional<double> nodata_override) {
+                    std::optional<double> nodata_override,
+                    const ValidRange& range) {
     init_gdal();
     namespace fs = std::filesystem;
     if (path.find('\0') != std::string::npos) {
@@ -247,6 +248,7 @@ DemInfo inspect_dem(const std::string& path,
     }
     DemInfo info;
     info.path = path;
+    info.valid_range = range;
     info.driver = ds->GetDriver() ? ds->GetDriver()->GetDescription() : "";
     info.width = ds->GetRasterXSize();
     info.height = ds->GetRasterYSize();

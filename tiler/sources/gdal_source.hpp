@@ -14,6 +14,22 @@
 
 namespace tb::tiler {
 
+// Heights outside this range (metres, after scale and offset) are no place on Earth: the
+// Challenger Deep lies near -11,000 m and Everest near 8,850 m. Such samples (+-3.4e38 left by
+// a conversion of an ASCII grid's inf, a spike of 3e38, undeclared markers out of range) count
+// as nodata, and one warning per source says how many and where the first lies.
+inline constexpr double kLowestHeight = -12000;
+inline constexpr double kHighestHeight = 9000;
+
+// The heights a source may hold (--valid-range MIN,MAX): kLowestHeight..kHighestHeight unless
+// changed (another planet, a DEM whose offset puts its heights elsewhere).
+struct ValidRange {
+    double low = kLowestHeight, high = kHighestHeight;
+    bool is_default() const { return low == kLowestHeight && high == kHighestHeight; }
+};
+// "MIN,MAX" (metres, MIN < MAX, both finite); InputError naming `what` otherwise.
+ValidRange parse_valid_range(const std::string& text, const std::string& what);
+
 struct DemInfo {
     std::string path;
     std::string driver; // GDAL short name: GTiff, SRTMHGT, DTED, AAIGrid, ...
@@ -40,6 +56,7 @@ struct DemInfo {
     // Samples outside kLowestHeight..kHighestHeight (counted as nodata), and the first one
     // found (row by row): its pixel and height. Counted over every sample when range_exact,
     // else over GDAL's approximate pass (a lower bound).
+    ValidRange valid_range; // heights outside it are outliers
     std::int64_t outliers = 0;
     std::int64_t outlier_column = 0, outlier_row = 0;
     double outlier_height = 0;
@@ -55,19 +72,16 @@ struct DemInfo {
 inline constexpr double kLikelyNodataShare = 0.005;
 inline constexpr double kLikelyNodataGap = 500;
 
-// Heights outside this range (metres, after scale and offset) are no place on Earth: the
-// Challenger Deep lies near -11,000 m and Everest near 8,850 m. Such samples (+-3.4e38 left by
-// a conversion of an ASCII grid's inf, a spike of 3e38, undeclared markers out of range) count
-// as nodata, and one warning per source says how many and where the first lies.
-inline constexpr double kLowestHeight = -12000;
-inline constexpr double kHighestHeight = 9000;
-
 // The height of a raw sample of band 1, or NaN when it is nodata: NaN, +-Inf, equal to
 // `nodata` (compared as float32 too for Float32 bands, whose nodata is often written as a
 // double that is not exactly a float), or outside kLowestHeight..kHighestHeight once scale and
 // offset are applied. This is the one place that decides which source values are heights.
-double to_height(
-    double raw, const std::optional<double>& nodata, bool float32, double scale, double offset);
+double to_height(double raw,
+                 const std::optional<double>& nodata,
+                 bool float32,
+                 double scale,
+                 double offset,
+                 const ValidRange& range = {});
 // The same without the range: what the sample says, NaN for nodata only.
 double sample_height(
     double raw, const std::optional<double>& nodata, bool float32, double scale, double offset);
@@ -84,7 +98,8 @@ inline constexpr double kExactRangeSamples = 1e9;
 // message when the file cannot be read (permissions, truncated data, a missing VRT source).
 DemInfo inspect_dem(const std::string& path,
                     double exact_range_samples = kExactRangeSamples,
-                    std::optional<double> nodata = std::nullopt);
+                    std::optional<double> nodata = std::nullopt,
+                    const ValidRange& range = {});
 
 // Registers GDAL drivers once and routes GDAL's error handler to our logger. Idempotent. GDAL's
 // block cache starts at kDefaultBlockCacheMb unless GDAL_CACHEMAX is set (GDAL's own default,
@@ -146,7 +161,8 @@ public:
     // likely voids not declared as nodata (DemInfo::likely_nodata) while `nodata` is not given;
     // IoError when a file cannot be read.
     static std::shared_ptr<const DemSource> open(const std::vector<std::string>& paths,
-                                                 std::optional<double> nodata = std::nullopt);
+                                                 std::optional<double> nodata = std::nullopt,
+                                                 const ValidRange& range = {});
     virtual ~DemSource() = default;
 
     // Description of the (mosaic) raster, as inspect_dem gives it.

@@ -16,7 +16,8 @@ DemSummary load_or_make_summary(const LayerOptions& options,
     const auto dir =
         summary_dir_for(options.summary_dir, std::int64_t{pixels.width} * pixels.height);
     const auto key =
-        dir ? summary_key(options.sources, options.nodata, datum, pixels) : std::nullopt;
+        dir ? summary_key(options.sources, options.nodata, datum, pixels, options.valid_range)
+            : std::nullopt;
     if (!key) {
         return DemSummary::build(source, pixels, datum);
     }

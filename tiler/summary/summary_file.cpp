@@ -106,7 +106,8 @@ std::optional<DemSummary> decode_levels(const std::string& in, std::size_t at, s
 std::optional<std::string> summary_key(const std::vector<std::string>& sources,
                                        std::optional<double> nodata,
                                        VerticalDatum datum,
-                                       const PixelGrid& grid) {
+                                       const PixelGrid& grid,
+                                       const ValidRange& range) {
     std::ostringstream key;
     key.precision(17);
     key << "terrabound summary 1";
@@ -122,6 +123,9 @@ std::optional<std::string> summary_key(const std::vector<std::string>& sources,
     }
     key << "\nnodata " << (nodata ? std::to_string(*nodata) : "file");
     key << "\ndatum " << static_cast<int>(datum);
+    if (!range.is_default()) {
+        key << "\nvalid " << range.low << " " << range.high;
+    }
     key << "\ngrid " << grid.x0 << " " << grid.y0 << " " << grid.dx << " " << grid.dy << " "
         << grid.width << " " << grid.height << " " << (grid.lonlat ? "lonlat" : "mercator");
     return key.str();

@@ -33,7 +33,8 @@ inline constexpr std::int64_t kSummaryFilePixels = std::int64_t{16} << 20;
 std::optional<std::string> summary_key(const std::vector<std::string>& sources,
                                        std::optional<double> nodata,
                                        VerticalDatum datum,
-                                       const PixelGrid& grid);
+                                       const PixelGrid& grid,
+                                       const ValidRange& range = {});
 
 // DIR/{stem of the first source}-{hash of key}.tbsum
 std::filesystem::path summary_path(const std::filesystem::path& dir,
