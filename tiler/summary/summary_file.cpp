@@ -1,15 +1,14 @@
 // The DEM summary on disk: key, atomic write, verified read (see summary_file.hpp).
 #include "tiler/summary/summary_file.hpp"
 
+#include "core/error.hpp"
 #include "tiler/log.hpp"
+#include "tiler/stores/atomic_file.hpp"
 #include "tiler/stores/checksum.hpp"
 
 #include <sys/stat.h>
-#include <unistd.h>
 
-#include <atomic>
 #include <cctype>
-#include <cerrno>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -22,8 +21,6 @@ namespace {
 
 constexpr char kMagic[8] = {'T', 'B', 'S', 'U', 'M', 'M', '0', '1'};
 constexpr std::size_t kBlockBytes = 5 * sizeof(float);
-
-std::atomic<unsigned> g_temp_counter{0};
 
 // FNV-1a, 64 bits: names the file; the key inside it is what is trusted.
 std::uint64_t fnv1a(const std::string& text) {
@@ -186,32 +183,15 @@ void save_summary(const std::filesystem::path& path,
                   std::to_string(bytes.size() >> 20) + " MiB; it will be made again next time");
         return;
     }
-    const std::filesystem::path temp = path.string() + ".tmp-" + std::to_string(::getpid()) + "-" +
-                                       std::to_string(g_temp_counter.fetch_add(1));
-    int err = 0;
-    if (std::FILE* f = std::fopen(temp.c_str(), "wb"); f == nullptr) {
-        err = errno;
-    } else {
-        if (std::fwrite(bytes.data(), 1, bytes.size(), f) != bytes.size() || std::fflush(f) != 0 ||
-            ::fsync(::fileno(f)) != 0) {
-            err = errno;
-        }
-        if (std::fclose(f) != 0 && err == 0) {
-            err = errno;
-        }
-    }
-    if (err == 0 && std::rename(temp.c_str(), path.c_str()) != 0) {
-        err = errno;
-    }
-    if (err == 0) {
-        log::info(path.string() + ": summary saved (" + std::to_string(bytes.size() >> 10) +
-                  " KiB)");
+    try {
+        write_file_atomically(path.string(), bytes);
+    } catch (const IoError& e) {
+        log::warn(std::string(e.what()) +
+                  "; the summary will be made again next time (set summary_dir to a writable "
+                  "directory, or \"off\")");
         return;
     }
-    std::filesystem::remove(temp, ec);
-    log::warn(path.string() + ": not saved (" + std::strerror(err) +
-              "); it will be made again next time (set summary_dir to a writable directory, "
-              "or \"off\")");
+    log::info(path.string() + ": summary saved (" + std::to_string(bytes.size() >> 10) + " KiB)");
 }
 
 std::optional<std::filesystem::path> default_summary_dir() {
