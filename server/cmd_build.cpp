@@ -143,6 +143,9 @@ int run(const Args& args) {
     if (auto v = args.get("formats")) {
         o.formats = parse_formats(*v);
     }
+    if (auto v = args.get("terrain-extensions")) {
+        o.terrain_extensions = tiler::parse_terrain_extensions(*v);
+    }
     if (args.has("dem-size")) {
         const long long n = args.get_int("dem-size", 0);
         if (n != 256 && n != 512) {
@@ -226,6 +229,12 @@ const Command& build_command() {
               "terrarium and mapbox are PNG DEM tiles (EPSG:3857 XYZ) under OUT/{layer}/dem/; "
               "terrain is quantized-mesh with OUT/{layer}/layer.json, terrain3d 3D Tiles "
               "terrain with OUT/{layer}/terrain/tileset.json (both geodetic, from zoom 0)"},
+             {"terrain-extensions",
+              "LIST",
+              "quantized-mesh extensions each .terrain tile holds and layer.json lists: "
+              "metadata (default), octvertexnormals, watermask, comma-separated, or all or none; "
+              ".terrain files are stored gzip-compressed (send them with Content-Encoding: "
+              "gzip)"},
              {"dem-size", "P", "DEM tiles are P x P pixels, 256 or 512 (default 512)"},
              {"dem-heights", "H", "DEM tile heights: sea_level (default) or ellipsoid"},
              {"nodata", "V", "raw sample value to treat as nodata, replacing the file's own"},

@@ -1,9 +1,9 @@
 // Accept-Encoding negotiation and compression.
 #include "server/encoding.hpp"
 #include "server/request_head.hpp"
+#include "tiler/gzip.hpp"
 
 #include <brotli/encode.h>
-#include <zlib.h>
 
 #include <algorithm>
 #include <cstring>
@@ -108,25 +108,7 @@ std::string compress(std::string_view bytes, Coding coding) {
         return out;
     }
     if (coding == Coding::Gzip) {
-        z_stream z;
-        std::memset(&z, 0, sizeof z);
-        // 15 + 16: a gzip wrapper rather than zlib's own.
-        if (deflateInit2(&z, 6, Z_DEFLATED, 15 + 16, 8, Z_DEFAULT_STRATEGY) != Z_OK) {
-            throw std::runtime_error("gzip compression failed to start");
-        }
-        std::string out(deflateBound(&z, static_cast<uLong>(bytes.size())), '\0');
-        z.next_in = reinterpret_cast<Bytef*>(const_cast<char*>(bytes.data()));
-        z.avail_in = static_cast<uInt>(bytes.size());
-        z.next_out = reinterpret_cast<Bytef*>(out.data());
-        z.avail_out = static_cast<uInt>(out.size());
-        const int rc = deflate(&z, Z_FINISH);
-        const std::size_t size = out.size() - z.avail_out;
-        deflateEnd(&z);
-        if (rc != Z_STREAM_END) {
-            throw std::runtime_error("gzip compression failed");
-        }
-        out.resize(size);
-        return out;
+        return tiler::gzip_compress(bytes, 6);
     }
     return std::string(bytes);
 }

@@ -4,6 +4,8 @@
 #include "terrain3d_reader.hpp"
 #include "tiler/dem_tiles.hpp"
 #include "tiler/formats/draco_decode.hpp"
+#include "tiler/formats/quantized_mesh.hpp"
+#include "tiler/gzip.hpp"
 #include "tiler/pyramid/build.hpp"
 #include "tiler/stores/store.hpp"
 
@@ -795,7 +797,8 @@ TEST_CASE("build -o under a directory that does not exist fails with exit 3 and 
 }
 
 TEST_CASE("build --formats glb,terrain writes layer.json and every terrain tile it lists from "
-          "zoom 0, the layer's own bytes, into both stores; a --bbox build writes no layer.json") {
+          "zoom 0, the layer's own bytes with only the metadata extension, gzip-compressed in a "
+          "directory and raw in SQLite; a --bbox build writes no layer.json") {
     BuildDir dir;
     const auto dem = write_dem(dir / "dem.tif");
     const Run a = run(args(dem, dir / "out", {"--formats", "glb,terrain", "--json"}), dir);
@@ -808,7 +811,8 @@ TEST_CASE("build --formats glb,terrain writes layer.json and every terrain tile 
     const auto layer = small_layer(dem);
     std::string layer_json;
     REQUIRE(layer->document("layer.json", layer_json));
-    CHECK(slurp(root / "layer.json") == layer_json);
+    CHECK(slurp(root / "layer.json") == layer_json_with_extensions(layer_json, kMetadata));
+    CHECK(slurp(root / "layer.json").find("\"extensions\":[\"metadata\"],") != std::string::npos);
     CHECK(layer_json.find("\"format\":\"quantized-mesh-1.0\"") != std::string::npos);
 
     // Every available range of layer.json, read back from its text, is on disk.
@@ -829,7 +833,7 @@ TEST_CASE("build --formats glb,terrain writes layer.json and every terrain tile 
                     const TileId id{static_cast<int>(level), x, y};
                     expected[std::to_string(level) + "/" + std::to_string(x) + "/" +
                              std::to_string(y) + ".terrain"] =
-                        layer->make_tile(id, Format::Terrain);
+                        select_extensions(layer->make_tile(id, Format::Terrain), kMetadata);
                 }
             }
         }
@@ -840,7 +844,8 @@ TEST_CASE("build --formats glb,terrain writes layer.json and every terrain tile 
     std::map<std::string, std::string> written;
     for (const auto& [rel, bytes] : tree(root)) {
         if (rel.ends_with(".terrain")) {
-            written[rel] = bytes;
+            REQUIRE(looks_gzipped(bytes));
+            written[rel] = gzip_decompress(bytes, std::size_t{1} << 30).value_or("(damaged)");
         }
     }
     CHECK(written.size() == expected.size());
@@ -862,7 +867,8 @@ TEST_CASE("build --formats glb,terrain writes layer.json and every terrain tile 
         }
     }
     CHECK(in_db == expected.size());
-    CHECK(TileStore::open(dir / "out.sqlite")->get_document("terrain", "layer.json") == layer_json);
+    CHECK(TileStore::open(dir / "out.sqlite")->get_document("terrain", "layer.json") ==
+          layer_json_with_extensions(layer_json, kMetadata));
 
     const Run part =
         run(args(dem, dir / "part", {"--formats", "terrain", "--bbox", "7.3,46.3,7.4,46.4"}), dir);
@@ -870,6 +876,34 @@ TEST_CASE("build --formats glb,terrain writes layer.json and every terrain tile 
     REQUIRE(part.code == 0);
     CHECK(part.err.find("layer.json not written") != std::string::npos);
     CHECK_FALSE(fs::exists(dir.path / "part/terrain/layer.json"));
+}
+
+TEST_CASE("build --terrain-extensions all keeps the layer's whole terrain tiles and lists every "
+          "extension; resuming with another list is refused, naming it") {
+    BuildDir dir;
+    const auto dem = write_dem(dir / "dem.tif");
+    const Run a =
+        run(args(dem, dir / "out", {"--formats", "terrain", "--terrain-extensions", "all"}), dir);
+    INFO(a.err);
+    REQUIRE(a.code == 0);
+    const auto layer = small_layer(dem);
+    std::string layer_json;
+    REQUIRE(layer->document("layer.json", layer_json));
+    CHECK(slurp(dir.path / "out/terrain/layer.json") == layer_json);
+    auto store = TileStore::open(dir / "out");
+    for (const TileId id : {TileId{0, 0, 0}, TileId{0, 1, 0}}) {
+        CAPTURE(id.x);
+        CHECK(store->get(TileKey{"terrain", id, Format::Terrain, -1}) ==
+              layer->make_tile(id, Format::Terrain));
+    }
+
+    const Run other = run(args(dem, dir / "out", {"--formats", "terrain", "--resume"}), dir);
+    CHECK(other.code != 0);
+    CHECK(other.err.find(R"(terrain_extensions was ["octvertexnormals","watermask","metadata"], )"
+                         R"(now ["metadata"])") != std::string::npos);
+    const Run bad = run(args(dem, dir / "bad", {"--terrain-extensions", "normals"}), dir);
+    CHECK(bad.code != 0);
+    CHECK(bad.err.find("unknown name 'normals'") != std::string::npos);
 }
 
 TEST_CASE("build --formats terrain3d writes terrain/tileset.json, every subtree it reaches and "

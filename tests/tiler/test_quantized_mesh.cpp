@@ -218,6 +218,40 @@ TEST_CASE("each subset of extensions is the full tile's own bytes, in id order")
     CHECK_THROWS_AS(tiler::select_extensions(full.substr(0, 100), 7), InputError);
 }
 
+TEST_CASE("terrain extension lists parse by their layer.json names, and layer.json lists "
+          "exactly the kept ones") {
+    using tiler::kMetadata, tiler::kOctVertexNormals, tiler::kWaterMask;
+    CHECK(tiler::parse_terrain_extensions("all") == tiler::kAllQuantizedMeshExtensions);
+    CHECK(tiler::parse_terrain_extensions("none") == 0u);
+    CHECK(tiler::parse_terrain_extensions("metadata") == kMetadata);
+    CHECK(tiler::parse_terrain_extensions("watermask,octvertexnormals") ==
+          (kWaterMask | kOctVertexNormals));
+    for (const char* bad : {"", "metadata,", "normals", "Metadata", "all,metadata"}) {
+        CAPTURE(bad);
+        CHECK_THROWS_WITH_AS(tiler::parse_terrain_extensions(bad),
+                             doctest::Contains("name octvertexnormals, watermask or metadata"),
+                             InputError);
+    }
+    CHECK(tiler::terrain_extensions_json(0) == "[]");
+    CHECK(tiler::terrain_extensions_json(kWaterMask | kMetadata) == R"(["watermask","metadata"])");
+
+    tiler::TerrainSpec spec{"dem", 2, 4, LonLatBox{7, 46, 7.5, 46.5}, [](int z) { return 1.0 * z; }};
+    const std::string full = tiler::terrain_layer_json(spec);
+    CHECK(full.find(R"("extensions":["octvertexnormals","watermask","metadata"],)"
+                    R"("metadataAvailability":10,)") != std::string::npos);
+    CHECK(tiler::layer_json_with_extensions(full, tiler::kAllQuantizedMeshExtensions) == full);
+    const std::string meta = tiler::layer_json_with_extensions(full, kMetadata);
+    CHECK(meta.find(R"("extensions":["metadata"],"metadataAvailability":10,)") !=
+          std::string::npos);
+    const std::string bare = tiler::layer_json_with_extensions(full, kOctVertexNormals);
+    CHECK(bare.find(R"("extensions":["octvertexnormals"],"available":[)") != std::string::npos);
+    CHECK(bare.find("metadataAvailability") == std::string::npos);
+    // Apart from the list, the documents are the same.
+    CHECK(bare.size() + std::string(R"(,"watermask","metadata","metadataAvailability":10)").size() ==
+          full.size());
+    CHECK_THROWS_AS(tiler::layer_json_with_extensions("{}", kMetadata), InputError);
+}
+
 TEST_CASE("oct-encoded normals decode with CesiumJS's formula within a degree (seed 7)") {
     std::mt19937 rng(7);
     std::normal_distribution<double> g;

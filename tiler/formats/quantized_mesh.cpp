@@ -838,6 +838,52 @@ std::string encode_quantized_mesh(const QuantizedMesh& q, const QuantizedMeshExt
     return out;
 }
 
+namespace {
+
+struct ExtensionName {
+    QuantizedMeshExtension id;
+    const char* name;
+};
+constexpr ExtensionName kExtensionNames[] = {
+    {kOctVertexNormals, "octvertexnormals"}, {kWaterMask, "watermask"}, {kMetadata, "metadata"}};
+
+} // namespace
+
+unsigned parse_terrain_extensions(std::string_view list) {
+    if (list == "all") {
+        return kAllQuantizedMeshExtensions;
+    }
+    if (list == "none") {
+        return 0;
+    }
+    unsigned mask = 0;
+    for (std::size_t start = 0; start <= list.size();) {
+        const std::size_t comma = std::min(list.find(',', start), list.size());
+        const std::string_view name = list.substr(start, comma - start);
+        const auto known = std::find_if(std::begin(kExtensionNames),
+                                        std::end(kExtensionNames),
+                                        [&](const ExtensionName& e) { return name == e.name; });
+        if (known == std::end(kExtensionNames)) {
+            throw InputError("terrain extensions: unknown name '" + std::string(name) +
+                             "'; name octvertexnormals, watermask or metadata, separated by "
+                             "commas, or all or none");
+        }
+        mask |= known->id;
+        start = comma + 1;
+    }
+    return mask;
+}
+
+std::string terrain_extensions_json(unsigned mask) {
+    std::string out = "[";
+    for (const ExtensionName& e : kExtensionNames) {
+        if ((mask & e.id) != 0) {
+            out += std::string(out.size() > 1 ? "," : "") + "\"" + e.name + "\"";
+        }
+    }
+    return out + "]";
+}
+
 std::string select_extensions(std::string_view tile, unsigned mask) {
     constexpr std::size_t kHeader = 88;
     const std::uint32_t n = get_u32(tile, kHeader);
@@ -922,8 +968,9 @@ std::string terrain_layer_json(const TerrainSpec& spec) {
                       "\"scheme\":\"tms\",\"projection\":\"EPSG:4326\",\"tiles\":[\"{z}/{x}/"
                       "{y}.terrain\"],\"minzoom\":0,\"maxzoom\":" +
                       std::to_string(spec.max_zoom) +
-                      ",\"bounds\":[-180,-90,180,90],\"extensions\":[\"octvertexnormals\","
-                      "\"watermask\",\"metadata\"],\"metadataAvailability\":" +
+                      ",\"bounds\":[-180,-90,180,90],\"extensions\":" +
+                      terrain_extensions_json(kAllQuantizedMeshExtensions) +
+                      ",\"metadataAvailability\":" +
                       std::to_string(kMetadataLevels) + ",\"available\":[";
     for (int z = 0; z <= spec.max_zoom; ++z) {
         const TileRange r = terrain_available(spec, z);
@@ -940,6 +987,23 @@ std::string terrain_layer_json(const TerrainSpec& spec) {
     }
     out += "}}}\n";
     return out;
+}
+
+std::string layer_json_with_extensions(std::string_view layer_json, unsigned mask) {
+    const std::string list = "\"extensions\":" + terrain_extensions_json(kAllQuantizedMeshExtensions);
+    const std::size_t at = layer_json.find(list);
+    if (at == std::string_view::npos) {
+        throw InputError("layer.json: no extension list to restrict");
+    }
+    std::string out(layer_json.substr(0, at));
+    out += "\"extensions\":" + terrain_extensions_json(mask);
+    std::string_view rest = layer_json.substr(at + list.size());
+    const std::string availability =
+        ",\"metadataAvailability\":" + std::to_string(kMetadataLevels);
+    if ((mask & kMetadata) == 0 && rest.substr(0, availability.size()) == availability) {
+        rest.remove_prefix(availability.size());
+    }
+    return out.append(rest);
 }
 
 std::string terrain_metadata(const TerrainSpec& spec, const TileId& id, double error, bool filler) {

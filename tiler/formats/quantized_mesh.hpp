@@ -29,6 +29,13 @@ enum QuantizedMeshExtension : unsigned {
 };
 inline constexpr unsigned kAllQuantizedMeshExtensions = kOctVertexNormals | kWaterMask | kMetadata;
 
+// A mask from a comma-separated list of the names layer.json and CesiumJS use
+// ("octvertexnormals", "watermask", "metadata"), or "all", or "none". InputError naming the
+// unknown name and the known ones otherwise.
+unsigned parse_terrain_extensions(std::string_view list);
+// The names of a mask's extensions as a JSON array, in id order: ["watermask","metadata"].
+std::string terrain_extensions_json(unsigned mask);
+
 // A mesh on the tile's rectangle quantized as the format stores it: vertex i at
 // u[i], v[i] in 0..32767 over the rectangle and height min_height + h[i] / 32767 * (max_height -
 // min_height). Vertices exactly on the rectangle's border lines (x == west, ...) get 0 or 32767;
@@ -163,6 +170,12 @@ TileRange terrain_available(const TerrainSpec& spec, int z);
 // layer.json for CesiumTerrainProvider: tiles "{z}/{x}/{y}.terrain" relative to it, every
 // extension, the availability of every zoom, and where the meshed data begins.
 std::string terrain_layer_json(const TerrainSpec& spec);
+
+// A layer.json of terrain_layer_json listing only the extensions in `mask` (those its tiles
+// hold), without metadataAvailability when the metadata extension is left out: CesiumJS asks
+// for, and trusts, exactly what layer.json lists. InputError if `layer_json` has no extension
+// list.
+std::string layer_json_with_extensions(std::string_view layer_json, unsigned mask);
 
 // The metadata extension's JSON of tile id: the available tiles under it for the next
 // kMetadataLevels zooms, and the error it publishes (null for filler).

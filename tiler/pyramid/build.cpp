@@ -68,6 +68,9 @@ Manifest make_manifest(const BuildOptions& o, const Layer& layer, int shard_coun
         formats += std::string(i ? ", " : "") + json_string(format_name(o.formats[i]));
     }
     m.emplace_back("formats", formats + "]");
+    if (std::find(o.formats.begin(), o.formats.end(), Format::Terrain) != o.formats.end()) {
+        m.emplace_back("terrain_extensions", terrain_extensions_json(o.terrain_extensions));
+    }
     m.emplace_back("shard_count", std::to_string(shard_count));
     return m;
 }
@@ -100,6 +103,18 @@ struct Made {
     std::vector<std::pair<Format, std::string>> tiles;
     bool dem = false; // a tile of the DEM pyramid
 };
+
+// Leaves in made's .terrain tile only the quantized-mesh extensions in `mask`.
+void keep_terrain_extensions(Made& made, unsigned mask) {
+    if (mask == kAllQuantizedMeshExtensions) {
+        return;
+    }
+    for (auto& [format, bytes] : made.tiles) {
+        if (format == Format::Terrain) {
+            bytes = select_extensions(bytes, mask);
+        }
+    }
+}
 
 class Queue {
 public:
@@ -240,13 +255,17 @@ bool terrain_complete(const Layer& layer,
 }
 
 // Writes layer.json when every tile it lists is in the store. Returns whether it was.
-bool write_layer_json(const Layer& layer, TileStore& store, const std::string& name) {
+bool write_layer_json(const Layer& layer,
+                      TileStore& store,
+                      const std::string& name,
+                      unsigned extensions) {
     if (!terrain_complete(layer, store, name, Format::Terrain)) {
         return false;
     }
     const TerrainSpec spec = terrain_spec_of(layer);
     std::string text;
     layer.document("layer.json", text);
+    text = layer_json_with_extensions(text, extensions);
     store.put_document(name, "layer.json", text);
     log::info("build: wrote layer.json (quantized-mesh terrain, zooms 0.." +
               std::to_string(spec.max_zoom) + ")");
@@ -796,7 +815,7 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
         summary.tileset_written =
             mesh_formats && write_tileset(*layer, *store, name, o.bbox.has_value());
         if (terrain && wants(o, Format::Terrain)) {
-            write_layer_json(*layer, *store, name);
+            write_layer_json(*layer, *store, name, o.terrain_extensions);
         }
         if (terrain && wants(o, Format::Terrain3d)) {
             write_terrain_tileset(*layer, *store, name);
@@ -889,6 +908,7 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
                     } else {
                         // Formats without data here are left out; the others share meshes.
                         made.tiles = layer->make_tiles(id, formats);
+                        keep_terrain_extensions(made, o.terrain_extensions);
                     }
                     if (made.tiles.empty()) {
                         ++counters.empty;
@@ -1013,7 +1033,7 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
             summary.tileset_written =
                 mesh_formats && write_tileset(*layer, *store, name, o.bbox.has_value());
             if (terrain && wants(o, Format::Terrain)) {
-                write_layer_json(*layer, *store, name);
+                write_layer_json(*layer, *store, name, o.terrain_extensions);
             }
             if (terrain && wants(o, Format::Terrain3d)) {
                 write_terrain_tileset(*layer, *store, name);

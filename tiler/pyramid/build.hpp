@@ -14,6 +14,7 @@
 // Tiles are enumerated in a fixed order (zoom ascending, then row-major y, x) and each tile's
 // bytes depend on the tile alone, so the output is the same whatever the thread count.
 #include "tiler/formats/format.hpp"
+#include "tiler/formats/quantized_mesh.hpp"
 #include "tiler/layer.hpp"
 #include "tiler/tile_grid.hpp"
 
@@ -52,6 +53,12 @@ struct BuildOptions {
     // Mesh formats make the layer's pyramid; DEM formats (terrarium, mapbox) the EPSG:3857 DEM
     // pyramid of tiler/dem_tiles.hpp, written alongside.
     std::vector<Format> formats{Format::Glb};
+    // The quantized-mesh extensions stored with each .terrain tile, and listed by layer.json. A
+    // static file cannot follow the Accept header, so by default it holds only the small
+    // metadata extension (child availability, the tile's bound): the 64 KiB water mask and
+    // the normals cost every client bytes that only a few ask for (`serve` sends those on
+    // request).
+    unsigned terrain_extensions = kMetadata;
     int threads = 0;                // worker threads; 0 = one per core
     bool resume = false;            // continue a build: same manifest, present tiles skipped
     bool force = false;             // delete the layer's existing tiles and documents first

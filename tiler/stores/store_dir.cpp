@@ -1,5 +1,6 @@
 // The directory store: one file per tile and per document, for static hosting.
-//   OUT/{layer}/{z}/{x}/{y}.{ext}            ladder eps (eps_level -1)
+//   OUT/{layer}/{z}/{x}/{y}.{ext}            ladder eps (eps_level -1); .terrain files hold
+//                                            gzip-compressed tiles (get and put see them raw)
 //   OUT/{layer}/eps{k}/{z}/{x}/{y}.{ext}     eps variant k
 //   OUT/{layer}/{name}                       documents (tileset.json, build-manifest.json, ...)
 // A write goes to a hidden temporary file in the target's directory
@@ -10,6 +11,7 @@
 // missing (with a warning), so it is made again. Paths are opened one directory at a time with
 // O_NOFOLLOW: a symbolic link inside the store is never followed, for reading or writing.
 #include "core/error.hpp"
+#include "tiler/gzip.hpp"
 #include "tiler/log.hpp"
 #include "tiler/stores/checksum.hpp"
 #include "tiler/stores/store.hpp"
@@ -31,6 +33,13 @@ namespace {
 namespace fs = std::filesystem;
 
 std::atomic<std::uint64_t> g_temp_counter{0};
+
+// Globe terrain tiles are stored gzip-compressed (what static hosts and CesiumJS expect of a
+// .terrain file, sent with Content-Encoding: gzip), at zlib's default level.
+constexpr int kTerrainGzipLevel = 6;
+// Inflating a stored terrain tile stops past this size, far above any tile's: a damaged or
+// hostile file cannot make a read take the memory of a gzip bomb.
+constexpr std::size_t kMaxTerrainBytes = std::size_t{256} << 20;
 
 // What to do about a failed write, by errno.
 std::string advice(int err) {
@@ -247,6 +256,22 @@ std::optional<std::string> read_verified(const std::string& root, const StorePat
     return bytes;
 }
 
+// A stored globe terrain tile's bytes: gzip-compressed since they are (the checksum has been
+// checked), as they are when an older store kept them raw. A quantized-mesh tile starts with
+// the tile centre's ECEF x as a double, so raw bytes that look gzipped but do not inflate are
+// taken as they are.
+std::optional<std::string> unzip_terrain(const StorePath& path, std::string bytes) {
+    if (!looks_gzipped(bytes)) {
+        return bytes;
+    }
+    if (auto tile = gzip_decompress(bytes, kMaxTerrainBytes)) {
+        return tile;
+    }
+    log::warn(path.shown + ": matches its checksum but is not a whole gzip member; served as "
+                           "it is stored");
+    return bytes;
+}
+
 bool is_temp_name(const std::string& name) {
     return name.size() > 1 && name.front() == '.' && name.find(".tmp-") != std::string::npos;
 }
@@ -256,13 +281,22 @@ public:
     explicit DirectoryStore(std::string root) : root_(std::move(root)) {}
 
     std::optional<std::string> get(const TileKey& key) const override {
-        return read_verified(root_, tile_path(key));
+        const StorePath path = tile_path(key);
+        auto bytes = read_verified(root_, path);
+        if (!bytes || key.format != Format::Terrain) {
+            return bytes;
+        }
+        return unzip_terrain(path, std::move(*bytes));
     }
 
     // A tile counts only when it is whole: --resume re-makes damaged ones.
     bool contains(const TileKey& key) const override { return get(key).has_value(); }
 
     void put(const TileKey& key, std::string_view bytes) override {
+        if (key.format == Format::Terrain) {
+            write_verified(root_, tile_path(key), gzip_compress(bytes, kTerrainGzipLevel));
+            return;
+        }
         write_verified(root_, tile_path(key), bytes);
     }
 
