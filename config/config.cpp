@@ -8,11 +8,13 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <arpa/inet.h>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <set>
 #include <sstream>
 
@@ -212,6 +214,32 @@ void parse_cors_origins(Checker& check,
     }
 }
 
+// "start_wait_ms" and "deadline_ms": the wait for a start counts within the deadline, so a
+// start_wait_ms above deadline_ms is an error; with deadline_ms alone, the default start wait
+// is shortened to it.
+void parse_waits(Checker& check, const json& value, const std::string& at, ServerConfig& out) {
+    std::optional<long long> start_wait, deadline;
+    if (value.contains("start_wait_ms")) {
+        start_wait = check.integer(value["start_wait_ms"], at + "/start_wait_ms", 1, kMaxWaitMs);
+    }
+    if (value.contains("deadline_ms")) {
+        deadline = check.integer(value["deadline_ms"], at + "/deadline_ms", 1, kMaxWaitMs);
+    }
+    if (deadline) {
+        out.deadline_ms = static_cast<int>(*deadline);
+        out.start_wait_ms = std::min(out.start_wait_ms, out.deadline_ms);
+    }
+    if (start_wait && deadline && *start_wait > *deadline) {
+        check.error(at + "/start_wait_ms",
+                    "expected at most deadline_ms (" + std::to_string(*deadline) + "), got " +
+                        std::to_string(*start_wait) +
+                        ": a request waits for its tile to start within its deadline; "
+                        "lower start_wait_ms or raise deadline_ms");
+    } else if (start_wait) {
+        out.start_wait_ms = static_cast<int>(*start_wait);
+    }
+}
+
 void parse_server(Checker& check, const json& value, ServerConfig& out) {
     const std::string at = "/server";
     if (!check.object(value, at)) {
@@ -228,7 +256,8 @@ void parse_server(Checker& check, const json& value, ServerConfig& out) {
                       "queue_limit",
                       "metrics",
                       "memory_mb",
-                      "start_wait_ms"});
+                      "start_wait_ms",
+                      "deadline_ms"});
     if (value.contains("host")) {
         if (auto s = check.string(value["host"], at + "/host")) {
             if (const auto problem = host_problem(*s)) {
@@ -266,11 +295,7 @@ void parse_server(Checker& check, const json& value, ServerConfig& out) {
             }
         }
     }
-    if (value.contains("start_wait_ms")) {
-        if (auto v = check.integer(value["start_wait_ms"], at + "/start_wait_ms", 1, kMaxWaitMs)) {
-            out.start_wait_ms = static_cast<int>(*v);
-        }
-    }
+    parse_waits(check, value, at, out);
     if (value.contains("queue_limit")) {
         if (auto v = check.integer(value["queue_limit"], at + "/queue_limit", 0, kMaxQueueLimit)) {
             out.queue_limit = static_cast<int>(*v);

@@ -35,6 +35,9 @@ struct ServerConfig {
     // How long a tile request waits for its generation to start; past it: 503 with Retry-After
     // (TileServiceOptions::start_wait says why 10 s).
     int start_wait_ms = 10000;
+    // How long a tile request may take in all; past it: 503 with Retry-After, and a generation
+    // no request waits for any more stops (TileServiceOptions::deadline). At least start_wait_ms.
+    int deadline_ms = 10000;
 };
 
 struct LayerConfig {

@@ -17,6 +17,7 @@
 
 #include <cstdlib>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <exception>
@@ -243,6 +244,17 @@ config::Config load_serve_config(const Args& args) {
         }
         cfg.server.memory_mb = static_cast<std::size_t>(mb);
     }
+    if (args.has("deadline-ms")) {
+        const long long ms = args.get_int("deadline-ms", cfg.server.deadline_ms);
+        if (ms < 1 || ms > 600000) {
+            throw InputError("--deadline-ms: expected 1..600000 (milliseconds a tile request may "
+                             "take before it gets 503), got " +
+                             std::to_string(ms));
+        }
+        cfg.server.deadline_ms = static_cast<int>(ms);
+        // The wait for a generation to start counts within the deadline.
+        cfg.server.start_wait_ms = std::min(cfg.server.start_wait_ms, cfg.server.deadline_ms);
+    }
     if (auto metrics = args.get("metrics")) {
         server::parse_metrics_access(*metrics, "--metrics"); // checked here, before the layers
         cfg.server.metrics = *metrics;
@@ -350,6 +362,7 @@ int run(const Args& args) {
     tile_options.threads = threads;
     tile_options.queue_limit = cfg.server.queue_limit;
     tile_options.start_wait = std::chrono::milliseconds(cfg.server.start_wait_ms);
+    tile_options.deadline = std::chrono::milliseconds(cfg.server.deadline_ms);
     server::TileService tiles(
         std::move(opened.served), tile_options, metrics, std::move(opened.unavailable));
 
@@ -395,7 +408,7 @@ const Command& serve_command() {
     static const Command command{
         {"serve",
          "[CONFIG.json | DEM...] [--host H] [--port P] [--threads N] [--store PATH] "
-         "[--metrics loopback|on|off] [--memory-mb MB]",
+         "[--metrics loopback|on|off] [--memory-mb MB] [--deadline-ms MS]",
          "Serve terrain tiles over HTTP.",
          {{"host", "HOST", "address to listen on (default 127.0.0.1, or the config's)"},
           {"port", "PORT", "port to listen on (default 8080; 0 picks a free port)"},
@@ -405,6 +418,11 @@ const Command& serve_command() {
            "MB",
            "memory budget: GDAL's block cache gets a quarter, the tile cache at most half "
            "(default: none; GDAL 64 MiB, tile cache cache_mb)"},
+          {"deadline-ms",
+           "MS",
+           "how long a tile request may take: past it, 503 with Retry-After, and a tile nobody "
+           "waits for any more stops (default 10000, or the config's deadline_ms; a longer "
+           "start_wait_ms is shortened to it)"},
           {"metrics",
            "WHO",
            "who may read /metrics: loopback (default: this machine only), on (anyone), off"},

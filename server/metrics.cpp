@@ -70,6 +70,12 @@ std::string Metrics::render() const {
     counter("tb_queue_rejections_total",
             "Requests answered 503 because the queue was full.",
             queue_rejections);
+    counter("tb_deadline_expiries_total",
+            "Tile requests answered 503 because their tile was not ready by their deadline.",
+            deadline_expiries);
+    counter("tb_generations_cancelled_total",
+            "Generations stopped at a checkpoint because every request for them had given up.",
+            generations_cancelled);
     counter("tb_store_write_failures_total",
             "Generated tiles that could not be stored.",
             store_write_failures);

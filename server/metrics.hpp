@@ -22,12 +22,14 @@ public:
 
     std::atomic<std::uint64_t> cache_hits{0}; // served from the memory LRU
     std::atomic<std::uint64_t> cache_misses{0};
-    std::atomic<std::uint64_t> store_hits{0};          // read from a layer's store
-    std::atomic<std::uint64_t> tiles_generated{0};     // make_tile calls that returned a tile
-    std::atomic<std::uint64_t> tiles_empty{0};         // make_tile calls that found no data
-    std::atomic<std::uint64_t> generation_micros{0};   // total time in make_tile
-    std::atomic<std::uint64_t> single_flight_waits{0}; // requests that joined a generation
-    std::atomic<std::uint64_t> queue_rejections{0};    // 503s for a full generation queue
+    std::atomic<std::uint64_t> store_hits{0};            // read from a layer's store
+    std::atomic<std::uint64_t> tiles_generated{0};       // make_tile calls that returned a tile
+    std::atomic<std::uint64_t> tiles_empty{0};           // make_tile calls that found no data
+    std::atomic<std::uint64_t> generation_micros{0};     // total time in make_tile
+    std::atomic<std::uint64_t> single_flight_waits{0};   // requests that joined a generation
+    std::atomic<std::uint64_t> queue_rejections{0};      // 503s for a full generation queue
+    std::atomic<std::uint64_t> deadline_expiries{0};     // 503s at the request's deadline
+    std::atomic<std::uint64_t> generations_cancelled{0}; // stopped: nobody waited any more
     std::atomic<std::uint64_t> store_write_failures{0};
     std::atomic<std::uint64_t> accepted_connections{0};
     std::atomic<std::uint64_t> refused_connections{0}; // over the connection limit: 503, closed

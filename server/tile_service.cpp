@@ -31,7 +31,9 @@ constexpr int kGenerationNice = 10;
 // Default ceiling of TileServiceOptions::max_waiting (each waiter holds an HTTP thread).
 constexpr long long kMaxWaiting = 1024;
 
-// States of a queued generation: a request drops it when it has not started within
+using Clock = std::chrono::steady_clock;
+
+// States of a queued generation (Job::state): a request drops it when it has not started within
 // TileServiceOptions::start_wait.
 constexpr int kQueued = 0, kStarted = 1, kDropped = 2;
 
@@ -237,43 +239,290 @@ std::string make_etag(std::string_view bytes) {
     return text;
 }
 
+namespace {
+
+// A queued generation and the requests waiting for it.
+struct Job {
+    std::atomic<int> state{kQueued}; // kQueued, kStarted or kDropped
+    // Every request waiting for it passed its deadline: it stops at its next checkpoint.
+    std::atomic<bool> cancelled{false};
+    int waiters = 0; // requests waiting for it (under TileService::Impl::flight_mutex)
+};
+
+using Promise = std::promise<std::shared_ptr<const Blob>>;
+
+// One tile being fetched: the answer every request for it waits for (nullptr: busy), and the
+// generation that makes it.
+struct Flight {
+    std::shared_future<std::shared_ptr<const Blob>> result;
+    std::shared_ptr<Job> job;
+};
+
+// A tile request past its checks.
+struct TileRequest {
+    const ServedLayer* served;
+    std::string layer;
+    tiler::TileId id;
+    tiler::Format format;
+    tiler::EpsChoice eps;
+    std::string key; // the memory cache's
+    Clock::time_point deadline;
+
+    bool in_store() const { return served->store && (eps.level < 0 || served->store_eps_levels); }
+    tiler::TileKey store_key() const { return {layer, id, format, eps.level}; }
+};
+
+} // namespace
+
 struct TileService::Impl {
     Impl(const TileServiceOptions& o, Metrics& m)
         : options(o), metrics(m), cache(o.cache_bytes, m), pool(o.threads, lower_priority) {}
 
-    TileServiceOptions options;
+    TileServiceOptions options; // start_wait at most deadline
     Metrics& metrics;
     LruCache cache;
 
-    std::mutex flight_mutex; // guards `flights` and `pending`
-    std::map<std::string, std::shared_future<std::shared_ptr<const Blob>>> flights;
+    std::mutex flight_mutex; // guards flights, pending, waiting and every Job::waiters
+    std::map<std::string, Flight> flights;
     int pending = 0; // generations queued or running
     int waiting = 0; // requests waiting for a generation
 
-    // Waits up to options.start_wait for `flight` (whose generation `job` this request leads)
-    // to finish, and true when it did or its generation has started by then. Otherwise drops
-    // the generation before it starts, answers its followers busy too, and returns false.
-    bool started_in_time(std::atomic<int>& job,
-                         const std::shared_future<std::shared_ptr<const Blob>>& flight,
-                         std::promise<std::shared_ptr<const Blob>>& promise,
-                         const std::string& key) {
-        if (flight.wait_for(options.start_wait) == std::future_status::ready) {
-            return true;
+    // A request counted in `waiting` and its job's waiters until it leaves, however it leaves.
+    struct Waiting {
+        Impl& s;
+        const std::string& key;
+        std::shared_ptr<Job> job;
+        bool gave_up = false; // left at its deadline, without an answer
+        ~Waiting() { s.leave(key, job, gave_up); }
+    };
+
+    std::shared_ptr<const Blob> fetch(const TileRequest& r);
+    std::shared_ptr<const Blob> from_store(const TileRequest& r, Promise& promise, const Job& job);
+    bool admit(const TileRequest& r, Promise& promise, Job& job);
+    std::shared_ptr<const Blob>
+    wait(const TileRequest& r, const Flight& flight, Promise* promise, bool& gave_up);
+    bool drop_unstarted(const std::string& key, const Flight& flight, Promise& promise);
+    void leave(const std::string& key, const std::shared_ptr<Job>& job, bool gave_up);
+    void generate(const TileRequest& r, Promise& promise, Job& job);
+    std::shared_ptr<const Blob>
+    make(const TileRequest& r, const Job& job, std::exception_ptr& error);
+
+    // Forgets the flight of `key` if `job` still makes it (a cancelled one may have been
+    // replaced by a newer flight meanwhile). Call with flight_mutex held.
+    void erase_flight(const std::string& key, const Job& job) {
+        if (const auto it = flights.find(key);
+            it != flights.end() && it->second.job.get() == &job) {
+            flights.erase(it);
         }
-        int queued = kQueued;
-        if (!job.compare_exchange_strong(queued, kDropped)) {
-            return true; // started meanwhile: its answer is coming
-        }
-        --metrics.queued_generations;
-        std::lock_guard<std::mutex> lock(flight_mutex);
-        --pending;
-        promise.set_value(nullptr);
-        flights.erase(key);
-        return false;
     }
 
     ThreadPool pool; // last: destroyed (drained and joined) first
 };
+
+// The tile of a request the memory cache does not hold: from the flight already fetching it,
+// else from the store, else from a generation this request queues. nullptr when busy.
+std::shared_ptr<const Blob> TileService::Impl::fetch(const TileRequest& r) {
+    Flight flight;
+    std::shared_ptr<Promise> promise; // set when this request leads the flight
+    {
+        std::lock_guard<std::mutex> lock(flight_mutex);
+        if (const auto it = flights.find(r.key); it != flights.end()) {
+            if (waiting >= options.max_waiting) {
+                ++metrics.queue_rejections;
+                return nullptr;
+            }
+            flight = it->second;
+            ++waiting;
+            ++flight.job->waiters;
+            ++metrics.single_flight_waits;
+        } else {
+            promise = std::make_shared<Promise>();
+            flight = {promise->get_future().share(), std::make_shared<Job>()};
+            flights.emplace(r.key, flight);
+        }
+    }
+    if (promise) {
+        if (auto stored = from_store(r, *promise, *flight.job)) {
+            return stored;
+        }
+        if (!admit(r, *promise, *flight.job)) {
+            ++metrics.queue_rejections;
+            return nullptr;
+        }
+        pool.submit([this, r, promise, job = flight.job] { generate(r, *promise, *job); });
+    }
+    Waiting waiting_for{*this, r.key, flight.job};
+    return wait(r, flight, promise.get(), waiting_for.gave_up);
+}
+
+// The tile from the layer's store when it is there, answering the flight `promise` leads;
+// nullptr when the store has no such tile or the layer no store.
+std::shared_ptr<const Blob>
+TileService::Impl::from_store(const TileRequest& r, Promise& promise, const Job& job) {
+    if (!r.in_store()) {
+        return nullptr;
+    }
+    std::optional<std::string> stored;
+    try {
+        stored = r.served->store->get(r.store_key()); // stores are thread-safe
+    } catch (...) {
+        std::lock_guard<std::mutex> lock(flight_mutex);
+        promise.set_exception(std::current_exception());
+        erase_flight(r.key, job);
+        throw;
+    }
+    if (!stored) {
+        return nullptr;
+    }
+    ++metrics.store_hits;
+    auto found = make_blob(std::move(*stored));
+    cache.put(r.key, found);
+    std::lock_guard<std::mutex> lock(flight_mutex);
+    promise.set_value(found);
+    erase_flight(r.key, job);
+    return found;
+}
+
+// Counts the generation of the flight this request leads, and the request as waiting for it,
+// when the queue and the waiters are below their limits: true, and the caller queues it.
+// Otherwise the flight is answered busy (its followers too) and false.
+bool TileService::Impl::admit(const TileRequest& r, Promise& promise, Job& job) {
+    {
+        std::lock_guard<std::mutex> lock(flight_mutex);
+        if (pending >= options.threads + options.queue_limit || waiting >= options.max_waiting) {
+            promise.set_value(nullptr);
+            erase_flight(r.key, job);
+            return false;
+        }
+        ++pending;
+        ++waiting;
+        ++job.waiters;
+    }
+    ++metrics.queued_generations;
+    return true;
+}
+
+// Waits for the flight's answer until the request's deadline; the lead (`promise` set) first
+// waits min(start_wait, deadline) for its generation to start, and drops it unstarted past
+// that. nullptr when busy, dropped or past the deadline (then `gave_up`).
+std::shared_ptr<const Blob> TileService::Impl::wait(const TileRequest& r,
+                                                    const Flight& flight,
+                                                    Promise* promise,
+                                                    bool& gave_up) {
+    if (promise != nullptr) {
+        const auto start_by = std::min(Clock::now() + options.start_wait, r.deadline);
+        if (flight.result.wait_until(start_by) != std::future_status::ready &&
+            drop_unstarted(r.key, flight, *promise)) {
+            ++metrics.queue_rejections;
+            return nullptr;
+        }
+    }
+    if (flight.result.wait_until(r.deadline) != std::future_status::ready) {
+        gave_up = true;
+        ++metrics.deadline_expiries;
+        return nullptr;
+    }
+    std::shared_ptr<const Blob> blob = flight.result.get(); // rethrows InputError / IoError
+    if (!blob) {
+        ++metrics.queue_rejections; // its generation was dropped unstarted, or not admitted
+    }
+    return blob;
+}
+
+// Drops the flight's generation if it has not started: its followers get busy too. True then;
+// false when it has started (its answer is coming).
+bool TileService::Impl::drop_unstarted(const std::string& key,
+                                       const Flight& flight,
+                                       Promise& promise) {
+    int queued = kQueued;
+    if (!flight.job->state.compare_exchange_strong(queued, kDropped)) {
+        return false;
+    }
+    --metrics.queued_generations;
+    std::lock_guard<std::mutex> lock(flight_mutex);
+    --pending;
+    promise.set_value(nullptr);
+    erase_flight(key, *flight.job);
+    return true;
+}
+
+// A request stops waiting for `job`. When it gave up at its deadline and was the last one
+// waiting, the generation is cancelled (it stops at its next checkpoint) and forgotten, so that
+// the next request for the tile starts afresh instead of joining work that is about to stop.
+void TileService::Impl::leave(const std::string& key,
+                              const std::shared_ptr<Job>& job,
+                              bool gave_up) {
+    std::lock_guard<std::mutex> lock(flight_mutex);
+    --waiting;
+    if (--job->waiters > 0 || !gave_up) {
+        return;
+    }
+    job->cancelled = true;
+    erase_flight(key, *job);
+}
+
+// Runs on the pool: makes the tile unless the generation was dropped, stores and caches it,
+// and answers the flight.
+void TileService::Impl::generate(const TileRequest& r, Promise& promise, Job& job) {
+    int queued = kQueued;
+    if (!job.state.compare_exchange_strong(queued, kStarted)) {
+        return; // dropped (start_wait): its requests were answered busy
+    }
+    --metrics.queued_generations;
+    ++metrics.in_flight_generations;
+    const auto start = Clock::now();
+    std::exception_ptr error;
+    const std::shared_ptr<const Blob> made = make(r, job, error);
+    metrics.generation_micros += static_cast<std::uint64_t>(
+        std::chrono::duration_cast<std::chrono::microseconds>(Clock::now() - start).count());
+    --metrics.in_flight_generations;
+    if (made && made->failure == 0 && r.in_store()) {
+        try {
+            r.served->store->put(r.store_key(), made->bytes);
+        } catch (const std::exception& e) {
+            ++metrics.store_write_failures;
+            log::warn(std::string("tile not stored: ") + e.what());
+        }
+    }
+    if (made) {
+        cache.put(r.key, made); // even when nobody waits any more: the next request is a hit
+    }
+    std::lock_guard<std::mutex> lock(flight_mutex);
+    --pending;
+    if (error) {
+        promise.set_exception(error);
+    } else {
+        promise.set_value(made);
+    }
+    erase_flight(r.key, job);
+}
+
+// The request's tile, or a remembered failure (404: no data; 400: refused, deterministic for
+// this tile and eps, so not remeshed), or nullptr: cancelled (every request gave up), or
+// another error, set in `error`.
+std::shared_ptr<const Blob>
+TileService::Impl::make(const TileRequest& r, const Job& job, std::exception_ptr& error) {
+    const tiler::Layer& layer = *r.served->layer;
+    const tiler::CancelFn cancelled = [&job] { return job.cancelled.load(); };
+    try {
+        auto made = make_blob(tiler::is_dem_format(r.format)
+                                  ? tiler::make_dem_tile(layer, r.id, r.format)
+                                  : layer.make_tile(r.id, r.format, r.eps, cancelled));
+        ++metrics.tiles_generated;
+        return made;
+    } catch (const tiler::Cancelled& e) {
+        ++metrics.generations_cancelled;
+        log::info(std::string(e.what()) + ": every request for it passed its deadline");
+    } catch (const NotFound& e) {
+        ++metrics.tiles_empty;
+        return make_failure(404, e.what());
+    } catch (const InputError& e) {
+        return make_failure(400, e.what());
+    } catch (...) {
+        error = std::current_exception();
+    }
+    return nullptr;
+}
 
 TileService::TileService(std::vector<ServedLayer> layers,
                          const TileServiceOptions& options,
@@ -281,7 +530,9 @@ TileService::TileService(std::vector<ServedLayer> layers,
                          std::vector<UnavailableLayer> unavailable)
     : layers_(std::move(layers)), unavailable_(std::move(unavailable)) {
     TB_ASSERT(options.threads >= 1 && options.queue_limit >= 0 && options.max_waiting >= 0);
+    TB_ASSERT(options.deadline.count() > 0 && options.start_wait.count() > 0);
     TileServiceOptions resolved = options;
+    resolved.start_wait = std::min(options.start_wait, options.deadline);
     if (resolved.max_waiting == 0) {
         resolved.max_waiting = static_cast<int>(
             std::min<long long>(2LL * (options.threads + options.queue_limit), kMaxWaiting));
@@ -394,21 +645,16 @@ void check_dem_tile(const tiler::Layer& layer, const tiler::TileId& id) {
     }
 }
 
-} // namespace
-
-std::shared_ptr<const Blob> TileService::tile(const std::string& layer_name,
-                                              const tiler::TileId& id,
-                                              tiler::Format format,
-                                              tiler::EpsChoice eps) {
-    const ServedLayer* served = &require(layer_name);
-    const tiler::Layer& layer = *served->layer;
-    bool format_served = false;
-    for (auto f : served->formats) {
-        format_served = format_served || f == format;
-    }
-    if (!format_served) {
-        throw NotFound("layer '" + layer_name + "' does not serve ." + tiler::extension(format) +
-                       " tiles");
+// The checks of a tile request, before any lookup: NotFound for a format the layer does not
+// serve, then check_eps and the id's checks for the format's pyramid.
+void check_tile(const ServedLayer& served,
+                const tiler::TileId& id,
+                tiler::Format format,
+                tiler::EpsChoice eps) {
+    const tiler::Layer& layer = *served.layer;
+    if (std::find(served.formats.begin(), served.formats.end(), format) == served.formats.end()) {
+        throw NotFound("layer '" + layer.options().name + "' does not serve ." +
+                       tiler::extension(format) + " tiles");
     }
     check_eps(layer, format, eps);
     if (tiler::is_dem_format(format)) {
@@ -418,151 +664,27 @@ std::shared_ptr<const Blob> TileService::tile(const std::string& layer_name,
     } else {
         check_mesh_tile(layer, id);
     }
+}
 
+} // namespace
+
+std::shared_ptr<const Blob> TileService::tile(const std::string& layer_name,
+                                              const tiler::TileId& id,
+                                              tiler::Format format,
+                                              tiler::EpsChoice eps) {
     Impl& s = *impl_;
-    const std::string key = tile_key(layer_name, id, format, eps.level);
-    std::shared_ptr<const Blob> blob = s.cache.get(key);
+    const auto deadline = Clock::now() + s.options.deadline;
+    const ServedLayer* served = &require(layer_name);
+    check_tile(*served, id, format, eps);
+    const TileRequest r{
+        served, layer_name, id, format, eps, tile_key(layer_name, id, format, eps.level), deadline};
+    std::shared_ptr<const Blob> blob = s.cache.get(r.key);
     if (blob) {
         ++s.metrics.cache_hits;
     } else {
         ++s.metrics.cache_misses;
-        std::shared_future<std::shared_ptr<const Blob>> flight;
-        std::shared_ptr<std::promise<std::shared_ptr<const Blob>>> promise;
-        std::shared_ptr<std::atomic<int>> job; // the queued generation this request leads
-        bool entered_wait = false;             // counted in s.waiting
-        {
-            std::lock_guard<std::mutex> lock(s.flight_mutex);
-            const auto it = s.flights.find(key);
-            if (it != s.flights.end()) {
-                if (s.waiting >= s.options.max_waiting) {
-                    ++s.metrics.queue_rejections;
-                    return nullptr;
-                }
-                ++s.waiting;
-                entered_wait = true;
-                flight = it->second;
-                ++s.metrics.single_flight_waits;
-            } else {
-                promise = std::make_shared<std::promise<std::shared_ptr<const Blob>>>();
-                flight = promise->get_future().share();
-                s.flights.emplace(key, flight);
-            }
-        }
-        if (promise) {
-            // This request leads: look in the store, else queue a generation.
-            const tiler::TileKey store_key{layer_name, id, format, eps.level};
-            const bool in_store = served->store && (eps.level < 0 || served->store_eps_levels);
-            std::optional<std::string> stored;
-            if (in_store) {
-                try {
-                    stored = served->store->get(store_key); // stores are thread-safe
-                } catch (...) {
-                    std::lock_guard<std::mutex> lock(s.flight_mutex);
-                    promise->set_exception(std::current_exception());
-                    s.flights.erase(key);
-                    throw;
-                }
-            }
-            if (stored) {
-                ++s.metrics.store_hits;
-                auto found = make_blob(std::move(*stored));
-                s.cache.put(key, found);
-                std::lock_guard<std::mutex> lock(s.flight_mutex);
-                promise->set_value(found);
-                s.flights.erase(key);
-            } else {
-                bool admitted = false;
-                {
-                    std::lock_guard<std::mutex> lock(s.flight_mutex);
-                    if (s.pending < s.options.threads + s.options.queue_limit &&
-                        s.waiting < s.options.max_waiting) {
-                        ++s.pending;
-                        ++s.waiting;
-                        entered_wait = true;
-                        admitted = true;
-                    } else {
-                        // Followers of this flight get the same answer: busy.
-                        promise->set_value(nullptr);
-                        s.flights.erase(key);
-                    }
-                }
-                if (!admitted) {
-                    ++s.metrics.queue_rejections;
-                    return nullptr;
-                }
-                ++s.metrics.queued_generations;
-                job = std::make_shared<std::atomic<int>>(kQueued);
-                s.pool.submit(
-                    [&s, served, &layer, store_key, in_store, key, promise, format, eps, id, job] {
-                        int queued = kQueued;
-                        if (!job->compare_exchange_strong(queued, kStarted)) {
-                            return; // dropped (start_wait): its requests were answered busy
-                        }
-                        --s.metrics.queued_generations;
-                        ++s.metrics.in_flight_generations;
-                        const auto start = std::chrono::steady_clock::now();
-                        std::shared_ptr<const Blob> made;
-                        std::exception_ptr failure;
-                        try {
-                            made = make_blob(tiler::is_dem_format(format)
-                                                 ? tiler::make_dem_tile(layer, id, format)
-                                                 : layer.make_tile(id, format, eps));
-                            ++s.metrics.tiles_generated;
-                        } catch (const NotFound& e) {
-                            made = make_failure(404, e.what());
-                            ++s.metrics.tiles_empty;
-                        } catch (const InputError& e) {
-                            // Deterministic for this tile and eps: remember it, don't remesh.
-                            made = make_failure(400, e.what());
-                        } catch (...) {
-                            failure = std::current_exception();
-                        }
-                        s.metrics.generation_micros += static_cast<std::uint64_t>(
-                            std::chrono::duration_cast<std::chrono::microseconds>(
-                                std::chrono::steady_clock::now() - start)
-                                .count());
-                        --s.metrics.in_flight_generations;
-                        if (made && made->failure == 0 && in_store) {
-                            try {
-                                served->store->put(store_key, made->bytes);
-                            } catch (const std::exception& e) {
-                                ++s.metrics.store_write_failures;
-                                log::warn(std::string("tile not stored: ") + e.what());
-                            }
-                        }
-                        if (made) {
-                            s.cache.put(key, made);
-                        }
-                        std::lock_guard<std::mutex> lock(s.flight_mutex);
-                        --s.pending;
-                        if (failure) {
-                            promise->set_exception(failure);
-                        } else {
-                            promise->set_value(made);
-                        }
-                        s.flights.erase(key);
-                    });
-            }
-        }
-        // Leaves the count of waiting requests however get() returns. A lead that found its tile
-        // in the store never entered it.
-        struct Leave {
-            Impl& s;
-            bool entered;
-            ~Leave() {
-                if (entered) {
-                    std::lock_guard<std::mutex> lock(s.flight_mutex);
-                    --s.waiting;
-                }
-            }
-        } leave{s, entered_wait};
-        if (job && !s.started_in_time(*job, flight, *promise, key)) {
-            ++s.metrics.queue_rejections;
-            return nullptr;
-        }
-        blob = flight.get(); // rethrows the generation's InputError / IoError
+        blob = s.fetch(r);
         if (!blob) {
-            ++s.metrics.queue_rejections;
             return nullptr;
         }
     }

@@ -59,6 +59,12 @@ struct TileServiceOptions {
     // first burst of cold tiles on a small server into holes (1 s failed the browser tests on 2
     // busy cores).
     std::chrono::milliseconds start_wait{10000};
+    // How long a tile request may take in all (> 0): past it the request gets 503 (Retry-After),
+    // and a generation whose every request has given up stops at its next checkpoint
+    // (tiler::CancelFn) instead of using a core for nobody. start_wait counts within it: the
+    // wait for a start is min(start_wait, deadline). A follower of a generation has its own
+    // deadline, so the generation goes on while any of its requests still waits.
+    std::chrono::milliseconds deadline{10000};
 };
 
 // An immutable response payload with its strong validator, or a remembered failure.
@@ -113,8 +119,9 @@ public:
     const std::string& encoded(const Blob& blob, Coding coding);
 
     // The encoded tile, or nullptr when the generation queue or the requests waiting for
-    // generations are at their limit (answer 503; decided at once, without waiting), or when its
-    // generation could not start within options.start_wait (503 after that wait). Throws
+    // generations are at their limit (answer 503; decided at once, without waiting), when its
+    // generation could not start within options.start_wait (503 after that wait), or when the
+    // tile was not ready by options.deadline after the call (503 then). Throws
     // NotFound for an unknown layer, a format the layer does not serve, or a tile with no data;
     // InputError for an id outside the scheme, an eps level the layer does not have (the same
     // message for every format), or an eps level asked of a format other than glb and drc.

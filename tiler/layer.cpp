@@ -82,6 +82,33 @@ std::shared_ptr<const DemSource> open_source(const LayerOptions& options) {
     return source;
 }
 
+// The CancelFn of the make_tile call running on this thread (null outside one). TerrainMaker
+// reaches mesh_at through its MeshFn, which has no room for it, and the whole tile runs on the
+// calling thread (the mesher's helpers never reach a checkpoint), so a thread_local carries it.
+thread_local const CancelFn* t_cancelled = nullptr;
+
+// Sets t_cancelled for the scope of one make_tile call, restoring the outer one after.
+class CancelScope {
+public:
+    explicit CancelScope(const CancelFn& cancelled) : outer_(t_cancelled) {
+        t_cancelled = cancelled ? &cancelled : nullptr;
+    }
+    ~CancelScope() { t_cancelled = outer_; }
+    CancelScope(const CancelScope&) = delete;
+    CancelScope& operator=(const CancelScope&) = delete;
+
+private:
+    const CancelFn* outer_;
+};
+
+// A checkpoint of a tile: throws Cancelled, naming the tile and the phase it stopped before,
+// when the running make_tile's CancelFn says so.
+void checkpoint(const TileId& id, const char* before) {
+    if (t_cancelled != nullptr && (*t_cancelled)()) {
+        throw Cancelled("tile " + tile_name(id) + " cancelled before " + before);
+    }
+}
+
 class DemLayer final : public Layer {
 public:
     explicit DemLayer(const LayerOptions& options)
@@ -133,7 +160,11 @@ public:
         return tileset_document(spec, path, out);
     }
 
-    std::string make_tile(const TileId& id, Format format, EpsChoice eps) const override {
+    std::string make_tile(const TileId& id,
+                          Format format,
+                          EpsChoice eps,
+                          const CancelFn& cancelled) const override {
+        const CancelScope scope(cancelled);
         if (is_terrain_format(format)) {
             if (eps.level >= 0) {
                 throw InputError("layer '" + options_.name +
@@ -141,6 +172,7 @@ public:
                                  "(CesiumJS picks levels itself); drop ?eps");
             }
             TerrainDraft draft = terrain_.draft(id);
+            checkpoint(id, "encoding");
             return terrain_.encode(draft, id, format);
         }
         double value = 0;
@@ -238,6 +270,7 @@ public:
     // measures, and the normals would cost another read of the source).
     std::string encode_at(const TileId& id, Format format, double eps, bool with_normals) const {
         const MeshedTile t = mesh_to_encode(id, eps);
+        checkpoint(id, "encoding");
         // Shading normals, the same function of position as the terrain tiles' (encode_tile
         // neither adds nor reorders vertices, so they stay aligned with the mesh it gives
         // Draco; a client decodes the vertices in Draco's own order, each with its normal),
@@ -299,9 +332,11 @@ public:
         MeshedTile t;
         t.budget = drop_voids ? plan_.budget_at(id.z, eps) : plan_.terrain_budget_at(id.z, eps);
         const ZoomSource from = zoom_source(id.z);
+        checkpoint(id, "reading its raster");
         if (from == ZoomSource::Pixels) {
             PixelTile pixel =
                 make_pixel_tile(*source_, *plan_.pixels(), options_.scheme, id, plan_.datum());
+            checkpoint(id, "meshing");
             std::vector<std::uint8_t> valid;
             if (!drop_voids) {
                 valid = fill_for_terrain(pixel);
@@ -315,6 +350,7 @@ public:
             return t;
         }
         t.raster = from == ZoomSource::Summary ? summary_raster(id) : lattice_raster(id);
+        checkpoint(id, "meshing");
         if (drop_voids) {
             t.mesh = to_tile_mesh(
                 t.raster,

@@ -1,6 +1,7 @@
 #pragma once
 // A layer: one or more DEMs published as one tile pyramid. This is what the `tile`, `build`
 // and `serve` commands share: DEM -> tile raster -> mesh -> encoded bytes.
+#include "core/error.hpp"
 #include "core/mesh.hpp"
 #include "core/triangulate.hpp"
 #include "tiler/formats/encode.hpp"
@@ -12,6 +13,7 @@
 #include "tiler/stores/atomic_file.hpp"
 #include "tiler/tile_grid.hpp"
 
+#include <functional>
 #include <memory>
 #include <optional>
 #include <span>
@@ -105,6 +107,17 @@ struct EpsChoice {
     int level = -1; // -1: the zoom's ladder eps; k >= 0: options().eps_levels[k]
 };
 
+// Asked at a tile's checkpoints (before reading its raster, before meshing, before encoding):
+// true stops the tile there with Cancelled. A server passes it so that a tile nobody waits for
+// any more stops using a core; an empty one never stops.
+using CancelFn = std::function<bool()>;
+
+// A tile stopped at a checkpoint because its CancelFn said so: nothing was made, and nothing
+// is wrong with the tile (not an InputError, NotFound nor IoError).
+struct Cancelled : Error {
+    using Error::Error;
+};
+
 class Layer {
 public:
     virtual ~Layer() = default;
@@ -129,8 +142,12 @@ public:
     virtual bool document(const std::string& path, std::string& out) const = 0;
 
     // The encoded tile. Throws InputError for an id outside the scheme or an unknown eps level,
-    // NotFound when the tile holds no data. Safe to call from many threads at once.
-    virtual std::string make_tile(const TileId& id, Format format, EpsChoice eps = {}) const = 0;
+    // NotFound when the tile holds no data, Cancelled when `cancelled` returns true at one of
+    // its checkpoints. Safe to call from many threads at once.
+    virtual std::string make_tile(const TileId& id,
+                                  Format format,
+                                  EpsChoice eps = {},
+                                  const CancelFn& cancelled = {}) const = 0;
     // The tile in each of `formats` (mesh and terrain formats, at the zoom's eps), in that
     // order: for each, the bytes make_tile(id, format) gives, with each mesh made once (glb and
     // drc share one, terrain and terrain3d another). A format make_tile would answer NotFound
