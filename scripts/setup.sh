@@ -14,6 +14,7 @@ BUILD_PACKAGES=(
     libmeshoptimizer-dev
     clang-14 libclang-rt-14-dev
     ca-certificates chromium
+    nginx-light
 )
 RUNTIME_PACKAGES=(
     libgdal32 libgeographiclib23 libdraco7 libcpp-httplib0.11 libsqlite3-0 zlib1g libbrotli1

@@ -143,6 +143,14 @@ int run(const Args& args) {
     if (auto v = args.get("formats")) {
         o.formats = parse_formats(*v);
     }
+    if (auto v = args.get("base-url")) {
+        if (!(v->starts_with("http://") || v->starts_with("https://") || v->starts_with("/"))) {
+            throw InputError("build: --base-url '" + *v +
+                             "': expected where OUT will be hosted, starting with http://, "
+                             "https:// or / (e.g. https://example.com/tiles)");
+        }
+        o.base_url = *v;
+    }
     if (auto v = args.get("terrain-extensions")) {
         o.terrain_extensions = tiler::parse_terrain_extensions(*v);
     }
@@ -229,6 +237,10 @@ const Command& build_command() {
               "terrarium and mapbox are PNG DEM tiles (EPSG:3857 XYZ) under OUT/{layer}/dem/; "
               "terrain is quantized-mesh with OUT/{layer}/layer.json, terrain3d 3D Tiles "
               "terrain with OUT/{layer}/terrain/tileset.json (both geodetic, from zoom 0)"},
+             {"base-url",
+              "URL",
+              "where OUT will be hosted (https://example.com/tiles): the DEM TileJSON lists "
+              "absolute tile URLs, which MapLibre needs (default: relative to the TileJSON)"},
              {"terrain-extensions",
               "LIST",
               "quantized-mesh extensions each .terrain tile holds and layer.json lists: "

@@ -7,6 +7,7 @@
 #include "tiler/formats/quantized_mesh.hpp"
 #include "tiler/gzip.hpp"
 #include "tiler/pyramid/build.hpp"
+#include "tiler/pyramid/hosting.hpp"
 #include "tiler/stores/store.hpp"
 
 #include <doctest/doctest.h>
@@ -14,6 +15,7 @@
 #include <ogr_spatialref.h>
 #include <sqlite3.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <csignal>
@@ -24,6 +26,7 @@
 #include <fstream>
 #include <map>
 #include <optional>
+#include <set>
 #include <spawn.h>
 #include <sstream>
 #include <string>
@@ -904,6 +907,70 @@ TEST_CASE("build --terrain-extensions all keeps the layer's whole terrain tiles 
     const Run bad = run(args(dem, dir / "bad", {"--terrain-extensions", "normals"}), dir);
     CHECK(bad.code != 0);
     CHECK(bad.err.find("unknown name 'normals'") != std::string::npos);
+}
+
+TEST_CASE("a directory build writes the host files, whose rules cover every file it holds, and "
+          "the DEM TileJSON with relative or --base-url tile URLs") {
+    BuildDir dir;
+    const auto dem = write_dem(dir / "dem.tif");
+    const Run a = run(args(dem,
+                           dir / "out",
+                           {"--formats", "glb,drc,terrarium,mapbox,terrain,terrain3d"}),
+                      dir);
+    INFO(a.err);
+    REQUIRE(a.code == 0);
+    for (const HostFile& f : host_files()) {
+        CHECK(slurp(dir.path / "out" / f.name) == f.text);
+    }
+    std::set<std::string> kinds;
+    for (const auto& [rel, bytes] : tree(dir.path / "out")) {
+        const std::string file = fs::path(rel).filename().string();
+        if (file.front() == '.' || file == "_headers" || file == "terrabound-nginx.conf") {
+            continue; // checksums and locks: hidden, never served
+        }
+        kinds.insert(fs::path(rel).extension().string().substr(1));
+    }
+    CHECK(kinds.size() >= 6); // glb drc png terrain subtree json
+    for (const std::string& kind : kinds) {
+        CAPTURE(kind);
+        CHECK(std::any_of(host_rules().begin(), host_rules().end(), [&](const HostRule& r) {
+            return r.extension == kind;
+        }));
+        CHECK(host_files()[0].text.find("location ~ \\." + kind + "$ {") != std::string::npos);
+        CHECK(host_files()[1].text.find("/*." + kind + "\n") != std::string::npos);
+    }
+    const auto rule = std::find_if(host_rules().begin(), host_rules().end(), [](const HostRule& r) {
+        return r.extension == "terrain";
+    });
+    REQUIRE(rule != host_rules().end());
+    CHECK(rule->encoding == "gzip");
+    CHECK(rule->media_type == "application/vnd.quantized-mesh");
+
+    const auto layer = small_layer(dem);
+    const std::string terrarium = slurp(dir.path / "out/terrain/dem/tilejson.json");
+    CHECK(terrarium == dem_tilejson(*layer, Format::Terrarium, "{z}/{x}/{y}.png"));
+    CHECK(terrarium.find(R"("encoding":"terrarium")") != std::string::npos);
+    CHECK(slurp(dir.path / "out/terrain/dem/mapbox/tilejson.json") ==
+          dem_tilejson(*layer, Format::Mapbox, "{z}/{x}/{y}.png"));
+
+    const Run b = run(args(dem,
+                           dir / "hosted",
+                           {"--formats", "terrarium", "--base-url", "https://example.com/t/"}),
+                      dir);
+    INFO(b.err);
+    REQUIRE(b.code == 0);
+    CHECK(slurp(dir.path / "hosted/terrain/dem/tilejson.json")
+              .find(R"("tiles":["https://example.com/t/terrain/dem/{z}/{x}/{y}.png"])") !=
+          std::string::npos);
+    const Run db = run(args(dem, dir / "out.sqlite", {"--formats", "mapbox"}), dir);
+    REQUIRE(db.code == 0);
+    CHECK(TileStore::open(dir / "out.sqlite")->get_document("terrain", "dem/mapbox/tilejson.json") ==
+          dem_tilejson(*layer, Format::Mapbox, "{z}/{x}/{y}.png"));
+    CHECK_FALSE(fs::exists(dir.path / "_headers"));
+    const Run bad = run(args(dem, dir / "bad", {"--base-url", "example.com"}), dir);
+    CHECK(bad.code != 0);
+    CHECK(bad.err.find("--base-url 'example.com': expected where OUT will be hosted") !=
+          std::string::npos);
 }
 
 TEST_CASE("build --formats terrain3d writes terrain/tileset.json, every subtree it reaches and "

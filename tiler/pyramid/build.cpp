@@ -12,6 +12,7 @@
 #include "tiler/dem_tiles.hpp"
 #include "tiler/json_number.hpp"
 #include "tiler/log.hpp"
+#include "tiler/pyramid/hosting.hpp"
 #include "tiler/pyramid/tile_settings.hpp"
 #include "tiler/stores/output_lock.hpp"
 #include "tiler/stores/store.hpp"
@@ -24,6 +25,7 @@
 #include <cstdlib>
 #include <deque>
 #include <exception>
+#include <filesystem>
 #include <map>
 #include <mutex>
 #include <sstream>
@@ -270,6 +272,32 @@ bool write_layer_json(const Layer& layer,
     log::info("build: wrote layer.json (quantized-mesh terrain, zooms 0.." +
               std::to_string(spec.max_zoom) + ")");
     return true;
+}
+
+// Writes what clients and static hosts need beside the tiles: the raster DEM tiles' TileJSON
+// (not for a --bbox build, whose TileJSON would claim tiles it lacks) and, in a directory, the
+// host files (tiler/pyramid/hosting.hpp).
+void write_static_hosting(const BuildOptions& o,
+                          const Layer& layer,
+                          TileStore& store,
+                          const std::string& name) {
+    for (Format f : o.formats) {
+        if (is_dem_format(f) && !o.bbox) {
+            store.put_document(name, dem_tilejson_name(f), static_dem_tilejson(layer, f, o.base_url));
+            log::info("build: wrote " + dem_tilejson_name(f) + " (" + format_name(f) +
+                      " DEM tiles" +
+                      (o.base_url.empty() ? ", tile URLs relative to it; MapLibre needs absolute "
+                                            "ones: build with --base-url URL"
+                                          : " at " + o.base_url) +
+                      ")");
+        }
+    }
+    std::error_code ec;
+    if (std::filesystem::is_directory(o.output, ec)) {
+        write_host_files(o.output);
+        log::info("build: wrote " + o.output + "/terrabound-nginx.conf and " + o.output +
+                  "/_headers (static hosting: media types, gzip .terrain, CORS, caching)");
+    }
 }
 
 // Writes the 3D Tiles terrain documents when every tile they list is in the store: each
@@ -820,6 +848,7 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
         if (terrain && wants(o, Format::Terrain3d)) {
             write_terrain_tileset(*layer, *store, name);
         }
+        write_static_hosting(o, *layer, *store, name);
         if (mesh_formats && !summary.tileset_written) {
             throw IoError(where + ": --finalize: tiles the tileset lists are missing although "
                                   "every shard reported (see the warning above); run each shard "
@@ -1038,6 +1067,7 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
             if (terrain && wants(o, Format::Terrain3d)) {
                 write_terrain_tileset(*layer, *store, name);
             }
+            write_static_hosting(o, *layer, *store, name);
         }
     }
     summary.over_eps = static_cast<std::int64_t>(layer->tiles_over_eps());

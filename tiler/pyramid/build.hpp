@@ -59,6 +59,9 @@ struct BuildOptions {
     // the normals cost every client bytes that only a few ask for (`serve` sends those on
     // request).
     unsigned terrain_extensions = kMetadata;
+    // Where the output will be hosted ("https://example.com/tiles"), for the absolute tile URLs
+    // of the raster DEM TileJSON; empty: URLs relative to the TileJSON.
+    std::string base_url;
     int threads = 0;                // worker threads; 0 = one per core
     bool resume = false;            // continue a build: same manifest, present tiles skipped
     bool force = false;             // delete the layer's existing tiles and documents first
