@@ -6,6 +6,7 @@
 #include "server/metrics.hpp"
 #include "server/tile_service.hpp"
 #include "tiler/cpus.hpp"
+#include "tiler/formats/quantized_mesh.hpp"
 #include "tiler/log.hpp"
 #include "tiler/pyramid/tile_settings.hpp"
 #include "tiler/sources/gdal_source.hpp"
@@ -328,7 +329,18 @@ OpenedLayers open_layers(const config::Config& cfg) {
                 log::info("store: " + store->describe());
             }
             // Tiles made with other settings would publish bounds that are not this layer's.
-            s.store_eps_levels = tiler::prepare_store_for_serving(*store, *s.layer).eps_levels;
+            const tiler::StoreUse use = tiler::prepare_store_for_serving(*store, *s.layer);
+            s.store_eps_levels = use.eps_levels;
+            // A build that kept only some extensions cannot answer a client asking for more.
+            s.store_terrain = use.terrain_extensions.empty() ||
+                              use.terrain_extensions ==
+                                  tiler::terrain_extensions_json(tiler::kAllQuantizedMeshExtensions);
+            if (!s.store_terrain) {
+                log::info("store: layer " + layer.options.name + ": its .terrain tiles hold only " +
+                          use.terrain_extensions +
+                          " (build --terrain-extensions); serve makes them with every extension "
+                          "instead, and keeps them in memory only");
+            }
             s.store = store;
         }
         log::info("layer " + layer.options.name + ": zooms " + std::to_string(s.layer->min_zoom()) +

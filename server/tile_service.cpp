@@ -268,7 +268,10 @@ struct TileRequest {
     std::string key; // the memory cache's
     Clock::time_point deadline;
 
-    bool in_store() const { return served->store && (eps.level < 0 || served->store_eps_levels); }
+    bool in_store() const {
+        return served->store && (eps.level < 0 || served->store_eps_levels) &&
+               (format != tiler::Format::Terrain || served->store_terrain);
+    }
     tiler::TileKey store_key() const { return {layer, id, format, eps.level}; }
 };
 

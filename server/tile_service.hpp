@@ -30,6 +30,9 @@ struct ServedLayer {
     std::shared_ptr<tiler::TileStore> store; // may be null; may be shared between layers
     // Whether tiles at eps levels (EpsChoice::level >= 0) go to the store too (StoreUse).
     bool store_eps_levels = true;
+    // Whether .terrain tiles go to the store too: not when a build stored them with only some
+    // quantized-mesh extensions (StoreUse::terrain_extensions).
+    bool store_terrain = true;
 };
 
 // A configured layer that could not be opened at startup (its DEM is unreadable, damaged, ...):

@@ -9,6 +9,7 @@
 #include "tiler/formats/quantized_mesh.hpp"
 #include "tiler/layer.hpp"
 #include "tiler/log.hpp"
+#include "tiler/stores/store.hpp"
 
 #include <doctest/doctest.h>
 #include <nlohmann/json.hpp>
@@ -199,6 +200,31 @@ TEST_CASE("a terrain tile carries exactly the extensions its Accept header names
     REQUIRE(plain);
     CHECK(plain->get_header_value("Content-Encoding").empty());
     CHECK(plain->body == bare);
+}
+
+TEST_CASE("a store whose .terrain tiles hold only some extensions (a build's default) is "
+          "neither read nor written for terrain: clients get every extension they ask for") {
+    auto& f = fixture();
+    TempDir dir;
+    const auto r = f.layer->tiles_at(f.layer->max_zoom());
+    const tiler::TileId id{f.layer->max_zoom(), r.x0, r.y0};
+    const std::string full = f.layer->make_tile(id, tiler::Format::Terrain);
+    const std::string cut = tiler::select_extensions(full, tiler::kMetadata);
+    auto store = std::shared_ptr<tiler::TileStore>(tiler::TileStore::open(dir / "out"));
+    const tiler::TileKey key{"hills", id, tiler::Format::Terrain, -1};
+    store->put(key, cut);
+
+    server::ServedLayer served{f.layer, {tiler::Format::Terrain}, store};
+    served.store_terrain = false;
+    RunningServer server({served});
+    auto c = server.client();
+    auto res = c.Get(terrain_url(id).c_str(), {{"Accept", kCesiumAccept}});
+    REQUIRE(res);
+    REQUIRE(res->status == 200);
+    CHECK(res->body == full);
+    CHECK(extension_ids(res->body) == std::vector<int>{1, 2, 4});
+    CHECK(store->get(key) == cut); // the build's tile is left as it was
+    CHECK(server.metrics.store_hits == 0);
 }
 
 // Asks `server` for the terrain tile `id` as CesiumJS does, in `coding` ("identity", "gzip" or

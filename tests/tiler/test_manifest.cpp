@@ -81,6 +81,25 @@ TEST_CASE("serve writes its manifest into an empty store, then keeps the tiles w
     }
 }
 
+TEST_CASE("a build manifest's terrain_extensions reach the server, and a serve cache records "
+          "none") {
+    ScratchDir dir;
+    const auto layer = Layer::open(small_options(write_hill(dir.file("hill.tif"))));
+    for (const auto& path : store_paths(dir)) {
+        INFO(path);
+        auto store = TileStore::open(path);
+        CHECK(prepare_store_for_serving(*store, *layer).terrain_extensions.empty());
+        store->remove_layer("hill");
+        Manifest built{{"terrabound_build", "1"}};
+        for (const auto& entry : tile_settings(*layer)) {
+            built.push_back(entry);
+        }
+        built.emplace_back("terrain_extensions", R"(["metadata"])");
+        store->put_document("hill", kBuildManifest, manifest_text(built));
+        CHECK(prepare_store_for_serving(*store, *layer).terrain_extensions == R"(["metadata"])");
+    }
+}
+
 TEST_CASE("a server's cached tiles made with another eps, eps level, nodata or DEM are removed "
           "before any is served") {
     ScratchDir dir;

@@ -106,6 +106,11 @@ StoreUse prepare_store_for_serving(TileStore& store, const std::string& name, co
         }
         StoreUse use;
         use.eps_levels = !first_change(built, only(now, "eps_levels")).has_value();
+        for (const auto& [key, value] : built) {
+            if (key == "terrain_extensions") {
+                use.terrain_extensions = value;
+            }
+        }
         if (!use.eps_levels) {
             log::info("store: " + where +
                       " was built without this layer's eps_levels; tiles at those levels are "

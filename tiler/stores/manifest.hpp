@@ -43,6 +43,10 @@ struct StoreUse {
     // A build has none, and the index k of another eps_levels list names another eps, so a
     // built store keeps only the layer's ladder tiles unless its eps_levels are the layer's.
     bool eps_levels = true;
+    // The build manifest's "terrain_extensions" (which quantized-mesh extensions its .terrain
+    // tiles hold, as a JSON array); empty when it records none (a serve cache, an older
+    // build, no terrain), whose tiles hold them all.
+    std::string terrain_extensions;
 };
 
 // Makes `store` ready to serve the tiles of layer `name`, whose tile settings are `now` (see
