@@ -6,6 +6,7 @@
 #include "core/error.hpp"
 #include "tiler/cpus.hpp"
 #include "tiler/dem_tiles.hpp"
+#include "tiler/pyramid/hosting.hpp"
 #include "tiler/formats/quantized_mesh.hpp"
 #include "tiler/formats/terrain_tiles.hpp"
 #include "tiler/json_number.hpp"
@@ -1289,19 +1290,11 @@ struct HttpServer::Impl {
     // source reads it (with its `encoding` and `tileSize`).
     std::string
     tilejson(const ServedLayer& served, tiler::Format encoding, const std::string& origin) const {
-        const auto& o = served.layer->options();
-        const tiler::DemTilePlan plan = tiler::dem_tile_plan(*served.layer);
-        const auto& b = plan.bounds;
-        std::ostringstream out;
-        out << "{\"tilejson\":\"3.0.0\",\"name\":\"" << json_escape(o.name)
-            << "\",\"scheme\":\"xyz\",\"tiles\":[\"" << json_escape(origin) << "/" << o.name
-            << "/dem/{z}/{x}/{y}.png?encoding=" << tiler::format_name(encoding)
-            << "\"],\"minzoom\":" << plan.min_zoom << ",\"maxzoom\":" << plan.max_zoom
-            << ",\"bounds\":[" << number(b.west) << "," << number(b.south) << "," << number(b.east)
-            << "," << number(b.north) << "],\"center\":[" << number(0.5 * (b.west + b.east)) << ","
-            << number(0.5 * (b.south + b.north)) << "," << plan.max_zoom << "],\"encoding\":\""
-            << tiler::format_name(encoding) << "\",\"tileSize\":" << plan.tile_size << "}\n";
-        return out.str();
+        const std::string& name = served.layer->options().name;
+        return tiler::dem_tilejson(*served.layer,
+                                   encoding,
+                                   origin + "/" + name + "/dem/{z}/{x}/{y}.png?encoding=" +
+                                       tiler::format_name(encoding));
     }
 
     // The layer, which must serve `format` (NotFound otherwise).
