@@ -6,9 +6,11 @@
 #include "tiler/formats/dem_png.hpp"
 #include "tiler/sources/gdal_source.hpp"
 #include "tiler/sources/geoid.hpp"
+#include "tiler/sources/tile_raster.hpp"
 
 #include <algorithm>
 #include <cmath>
+#include <utility>
 
 namespace tb::tiler {
 namespace {
@@ -22,6 +24,76 @@ std::string tile_name(const TileId& id) {
 
 bool in_range(const TileRange& r, const TileId& id) {
     return !r.empty() && id.x >= r.x0 && id.x <= r.x1 && id.y >= r.y0 && id.y <= r.y1;
+}
+
+// The pixels of zoom z (P per tile) whose centres lie in `bounds`: columns first..last, rows
+// first..last (north to south); a box narrower than a pixel gets the pixel holding its centre.
+struct PixelSpan {
+    std::int64_t first_column, last_column, first_row, last_row;
+};
+PixelSpan pixels_in(const LonLatBox& bounds, int z, int p) {
+    double west = 0, south = 0, east = 0, north = 0;
+    lonlat_to_native(Scheme::Mercator, {bounds.west, bounds.south}, west, south);
+    lonlat_to_native(Scheme::Mercator, {bounds.east, bounds.north}, east, north);
+    const double x0 = lattice_x(Scheme::Mercator, z, p, 0), y0 = lattice_y(Scheme::Mercator, z, p, 0);
+    const double pw = lattice_x(Scheme::Mercator, z, p, 1) - x0;
+    const auto span = [](double lo, double hi) {
+        auto first = static_cast<std::int64_t>(std::ceil(lo - 0.5));
+        auto last = static_cast<std::int64_t>(std::floor(hi - 0.5));
+        if (first > last) {
+            first = last = static_cast<std::int64_t>(std::floor(0.5 * (lo + hi)));
+        }
+        return std::pair{first, last};
+    };
+    const auto [c0, c1] = span((west - x0) / pw, (east - x0) / pw);
+    const auto [r0, r1] = span((y0 - north) / pw, (y0 - south) / pw);
+    return {c0, c1, r0, r1};
+}
+
+// Gives the pixels of the w x w block from pixel (column0, row0) that lie beyond the data's
+// footprint the height of the nearest pixel inside it (column and row clamped to the
+// footprint's), where that one is valid: MapLibre and deck.gl then draw the DEM's edge carried
+// outward, not a cliff down to sea level. A function of the pixel alone, so tiles agree.
+void extend_edges(const Layer& layer,
+                  const DemTilePlan& plan,
+                  int z,
+                  std::int64_t column0,
+                  std::int64_t row0,
+                  int w,
+                  std::vector<double>& heights,
+                  std::vector<std::uint8_t>& valid) {
+    const PixelSpan in = pixels_in(plan.bounds, z, plan.tile_size);
+    const auto clamp_column = [&](std::int64_t c) { return std::clamp(c, in.first_column, in.last_column); };
+    const auto clamp_row = [&](std::int64_t r) { return std::clamp(r, in.first_row, in.last_row); };
+    const std::int64_t c_lo = clamp_column(column0), c_hi = clamp_column(column0 + w - 1);
+    const std::int64_t r_lo = clamp_row(row0), r_hi = clamp_row(row0 + w - 1);
+    if (c_lo == column0 && c_hi == column0 + w - 1 && r_lo == row0 && r_hi == row0 + w - 1) {
+        return; // the block lies inside the footprint
+    }
+    // The clamped block, one lattice row per pixel row (pixel centres are the odd points of
+    // the (z, 2P) lattice).
+    const int lattice = 2 * plan.tile_size;
+    const int cols = static_cast<int>(c_hi - c_lo + 1), rows = static_cast<int>(r_hi - r_lo + 1);
+    std::vector<LatticeBlock> edge;
+    for (int j = 0; j < rows; ++j) {
+        edge.push_back(layer.sample(
+            Scheme::Mercator, z, lattice, 2 * c_lo + 1, 2 * (r_lo + j) + 1, 2 * cols - 1, 1));
+    }
+    for (int j = 0; j < w; ++j) {
+        for (int i = 0; i < w; ++i) {
+            const std::int64_t c = column0 + i, r = row0 + j;
+            if (clamp_column(c) == c && clamp_row(r) == r) {
+                continue; // inside: its own sample, or a void that fill_voids fills
+            }
+            const LatticeBlock& row = edge[static_cast<std::size_t>(clamp_row(r) - r_lo)];
+            const auto at = static_cast<std::size_t>(2 * (clamp_column(c) - c_lo));
+            const std::size_t k = static_cast<std::size_t>(j) * w + i;
+            if (row.valid[at] != 0) {
+                heights[k] = row.heights[at];
+                valid[k] = 1;
+            }
+        }
+    }
 }
 
 } // namespace
@@ -89,6 +161,7 @@ std::vector<double> dem_tile_heights(const Layer& layer, const TileId& id) {
             valid[static_cast<std::size_t>(j) * w + i] = row.valid[static_cast<std::size_t>(2 * i)];
         }
     }
+    extend_edges(layer, plan, id.z, id.x * p - m, id.y * p - m, w, heights, valid);
     const bool all_valid =
         std::all_of(valid.begin(), valid.end(), [](std::uint8_t v) { return v != 0; });
 

@@ -315,6 +315,62 @@ TEST_CASE("DEM tiles fill voids and the area beyond the DEM from the data, and s
     CHECK(hi <= 277.3 + 1e-9);
 }
 
+TEST_CASE("DEM tile pixels beyond the DEM's footprint carry the height of the nearest pixel "
+          "inside it: no cliff down to sea level around the data") {
+    ScratchDir dir;
+    const auto layer = open_dem_layer(write_test_dem(dir), DemHeights::SeaLevel, 256);
+    const int z = dem_tile_plan(*layer).max_zoom, p = 256;
+    const TileRange r = dem_tiles_at(*layer, z);
+    // Every pixel of the zoom's tiles, by global column and row.
+    const std::int64_t c0 = r.x0 * p, r0 = r.y0 * p;
+    const std::int64_t cols = (r.x1 - r.x0 + 1) * p, rows = (r.y1 - r.y0 + 1) * p;
+    std::vector<double> h(static_cast<std::size_t>(cols * rows));
+    for (std::int64_t y = r.y0; y <= r.y1; ++y) {
+        for (std::int64_t x = r.x0; x <= r.x1; ++x) {
+            const auto tile = dem_tile_heights(*layer, TileId{z, x, y});
+            for (int j = 0; j < p; ++j) {
+                for (int i = 0; i < p; ++i) {
+                    h[static_cast<std::size_t>((y * p + j - r0) * cols + (x * p + i - c0))] =
+                        tile[static_cast<std::size_t>(j) * p + i];
+                }
+            }
+        }
+    }
+    // The footprint (11..11.5 E, 57..57.5 N) in pixel centres, from the mercator formulas.
+    const double n = static_cast<double>(p) * std::exp2(z);
+    const auto lon_of = [&](std::int64_t c) { return (static_cast<double>(c) + 0.5) / n * 360 - 180; };
+    const auto lat_of = [&](std::int64_t row) {
+        const double m = kPi * (1 - 2 * (static_cast<double>(row) + 0.5) / n);
+        return std::atan(std::sinh(m)) * 180 / kPi;
+    };
+    std::int64_t first_c = c0, last_c = c0 + cols - 1, first_r = r0, last_r = r0 + rows - 1;
+    while (lon_of(first_c) < 11.0) ++first_c;
+    while (lon_of(last_c) > 11.5) --last_c;
+    while (lat_of(first_r) > 57.5) ++first_r;
+    while (lat_of(last_r) < 57.0) --last_r;
+    REQUIRE(first_c > c0);
+    REQUIRE(first_r > r0);
+    std::size_t outside = 0, same = 0;
+    double lo = INFINITY;
+    for (std::int64_t row = r0; row < r0 + rows; ++row) {
+        for (std::int64_t c = c0; c < c0 + cols; ++c) {
+            const std::int64_t cc = std::clamp(c, first_c, last_c), rr = std::clamp(row, first_r, last_r);
+            if (cc == c && rr == row) {
+                continue;
+            }
+            ++outside;
+            const double here = h[static_cast<std::size_t>((row - r0) * cols + (c - c0))];
+            const double nearest = h[static_cast<std::size_t>((rr - r0) * cols + (cc - c0))];
+            same += here == nearest ? 1 : 0;
+            lo = std::min(lo, here);
+        }
+    }
+    MESSAGE(outside << " pixels beyond the footprint, " << same << " equal to their nearest inside");
+    CHECK(outside > 10000u);
+    CHECK(same == outside);
+    CHECK(lo >= 22.7); // the fixture's lowest height: nothing drops to sea level
+}
+
 TEST_CASE("DEM tiles in ellipsoidal heights are the sea-level ones plus the EGM96 undulation") {
     ScratchDir dir;
     const std::string path = write_test_dem(dir);
