@@ -289,6 +289,33 @@ TEST_CASE("a summary saved to disk reads back block for block, and a damaged, cu
     CHECK(load_summary(path, *key));
 }
 
+TEST_CASE("saving a summary removes the temporary files a killed process left an hour ago or "
+          "more, and no other file") {
+    namespace fs = std::filesystem;
+    tb_test::ScratchDir dir;
+    const std::string dem = rough_dem(dir, "rough.tif", 0);
+    const auto source = DemSource::open({dem});
+    const auto grid = source->pixel_grid(Scheme::Geodetic);
+    REQUIRE(grid);
+    const DemSummary made = DemSummary::build(*source, *grid, VerticalDatum::Ellipsoid);
+    const auto key = summary_key({dem}, std::nullopt, VerticalDatum::Ellipsoid, *grid);
+    REQUIRE(key);
+    const fs::path cache = dir.file("cache");
+    fs::create_directories(cache);
+    const auto touch = [&](const std::string& name, std::chrono::minutes age) {
+        std::ofstream(cache / name) << "half";
+        fs::last_write_time(cache / name, fs::file_time_type::clock::now() - age);
+    };
+    touch("old-0123456789abcdef.tbsum.tmp-4242-1", std::chrono::minutes(61));
+    touch("new-0123456789abcdef.tbsum.tmp-4243-1", std::chrono::minutes(5));
+    touch("notes.tmp-1", std::chrono::minutes(600));
+    save_summary(summary_path(cache, dem, *key), *key, made);
+    CHECK_FALSE(fs::exists(cache / "old-0123456789abcdef.tbsum.tmp-4242-1"));
+    CHECK(fs::exists(cache / "new-0123456789abcdef.tbsum.tmp-4243-1"));
+    CHECK(fs::exists(cache / "notes.tmp-1"));
+    CHECK(load_summary(summary_path(cache, dem, *key), *key));
+}
+
 TEST_CASE("a layer keeps its summary in summary_dir, reads it back, and makes a new one when the "
           "source changes") {
     tb_test::ScratchDir dir;

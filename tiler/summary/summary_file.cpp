@@ -170,12 +170,34 @@ std::optional<DemSummary> load_summary(const std::filesystem::path& path, const 
     return std::nullopt;
 }
 
+void remove_stale_temporaries(const std::filesystem::path& dir) {
+    namespace fs = std::filesystem;
+    const auto now = fs::file_time_type::clock::now();
+    std::size_t removed = 0;
+    std::error_code ec;
+    for (auto it = fs::directory_iterator(dir, ec); !ec && it != fs::directory_iterator();
+         it.increment(ec)) {
+        std::error_code e;
+        const std::string name = it->path().filename().string();
+        if (name.find(".tbsum.tmp-") == std::string::npos || !it->is_regular_file(e) ||
+            now - fs::last_write_time(it->path(), e) < kStaleTemporaryAge || e) {
+            continue;
+        }
+        removed += fs::remove(it->path(), e) ? 1 : 0;
+    }
+    if (removed > 0) {
+        log::info(dir.string() + ": removed " + std::to_string(removed) +
+                  " summary file(s) a killed process left half-written");
+    }
+}
+
 void save_summary(const std::filesystem::path& path,
                   const std::string& key,
                   const DemSummary& summary) {
     const std::string bytes = encode(key, summary);
     std::error_code ec;
     std::filesystem::create_directories(path.parent_path(), ec);
+    remove_stale_temporaries(path.parent_path());
     const auto space = std::filesystem::space(path.parent_path(), ec);
     if (!ec && space.available < bytes.size() * 2) {
         log::warn(path.string() + ": not saved, the disk has " +

@@ -16,6 +16,7 @@
 #include "tiler/sources/gdal_source.hpp"
 #include "tiler/summary/dem_summary.hpp"
 
+#include <chrono>
 #include <cstdint>
 #include <filesystem>
 #include <optional>
@@ -51,6 +52,14 @@ std::optional<DemSummary> load_summary(const std::filesystem::path& path, const 
 void save_summary(const std::filesystem::path& path,
                   const std::string& key,
                   const DemSummary& summary);
+
+// Temporary summary files (*.tbsum.tmp-PID-N) this old are left by a killed process: no write
+// of a summary takes an hour.
+inline constexpr std::chrono::hours kStaleTemporaryAge{1};
+
+// Removes the temporary summary files in `dir` older than kStaleTemporaryAge (save_summary
+// calls it), logging how many; errors are ignored (the next save tries again).
+void remove_stale_temporaries(const std::filesystem::path& dir);
 
 // $XDG_CACHE_HOME/terrabound, else $HOME/.cache/terrabound; nullopt when neither is set.
 std::optional<std::filesystem::path> default_summary_dir();
