@@ -451,9 +451,17 @@ const Command& serve_command() {
          "With DEM files, each becomes a layer named after its file, with default settings.\n"
          "With a config file (JSON), every setting is explicit; see the README, "
          "\"Configuration\".\n"
-         "Tiles: /{layer}/{z}/{x}/{y}.glb or .drc, ?eps=K for the layer's eps_levels[K];\n"
-         "tilesets: /{layer}/tileset.json. SIGINT/SIGTERM finish requests in flight, then "
-         "exit.\n"},
+         "Routes (every layer, {layer} = its name):\n"
+         "  /{layer}/tileset.json               3D Tiles (CesiumJS, three.js, deck.gl)\n"
+         "  /{layer}/{z}/{x}/{y}.glb, .drc      its mesh tiles; ?eps=K: eps_levels[K]\n"
+         "  /{layer}/layer.json                 quantized-mesh terrain (CesiumTerrainProvider)\n"
+         "  /{layer}/{z}/{x}/{y}.terrain        its tiles, extensions as Accept asks\n"
+         "  /{layer}/terrain/tileset.json       3D Tiles terrain (Cesium3DTilesTerrainProvider)\n"
+         "  /{layer}/dem/tilejson.json          raster DEM for MapLibre / deck.gl (terrarium;\n"
+         "                                      ?encoding=mapbox for Terrain-RGB)\n"
+         "  /{layer}/dem/{z}/{x}/{y}.png        its tiles (same ?encoding)\n"
+         "  /layers, /health, /metrics, / (the viewer)\n"
+         "SIGINT/SIGTERM finish requests in flight, then exit.\n"},
         run};
     return command;
 }
