@@ -274,7 +274,12 @@ const Command& build_command() {
          "once 'terrabound build ... --finalize' with the same parameters. One build writes OUT\n"
          "at a time (the shards of one build together): another is refused at once, naming the\n"
          "holder's pid and host. The lock is OUT/.build.lock (OUT.sqlite.build.lock beside an\n"
-         "SQLite file), gone once the build ends; a killed build's lock is taken over."},
+         "SQLite file), gone once the build ends; a killed build's lock is taken over.\n"
+         "Outputs, under OUT/{layer}/ (the server's URLs): tileset.json and {z}/{x}/{y}.glb\n"
+         "(or .drc); layer.json and {z}/{x}/{y}.terrain (gzip-compressed); terrain/tileset.json\n"
+         "with its subtrees and glbs; dem/tilejson.json and dem/{z}/{x}/{y}.png (terrarium),\n"
+         "dem/mapbox/... (mapbox); build-manifest.json. In a directory also OUT/_headers and\n"
+         "OUT/terrabound-nginx.conf: how a static host must send the files."},
         run};
     return command;
 }
