@@ -6,6 +6,7 @@
 #include "tiler/dem_tiles.hpp"
 #include "tiler/log.hpp"
 #include "tiler/pyramid/build.hpp"
+#include "tiler/stores/store.hpp"
 
 #include <atomic>
 #include <csignal>
@@ -178,6 +179,8 @@ int run(const Args& args) {
     o.force = args.has("force");
     o.finalize = args.has("finalize");
 
+    tiler::check_store_formats(o.output, o.formats); // a container holds one DEM encoding
+
     // First SIGINT/SIGTERM: finish the tiles in flight and stop cleanly. The handler resets
     // itself, so a second one stops at once (atomic writes keep the store valid even then).
     struct sigaction action {};
@@ -223,7 +226,10 @@ const Command& build_command() {
          "INPUT... -o OUT [options]",
          "Pre-generate a tile pyramid into a directory or an SQLite file.",
          {
-             {"o", "OUT", "output: a directory, or a file ending in .sqlite (or .db)"},
+             {"o",
+              "OUT",
+              "output: a directory, a file ending in .sqlite (or .db), or OUT.mbtiles (MBTiles 1.3 "
+              "of one DEM encoding: --formats terrarium or mapbox)"},
              {"layer", "NAME", "layer name, [A-Za-z0-9_-]+ (default terrain)"},
              {"scheme", "S", "geodetic (default) or mercator"},
              {"size", "N", "tile raster is (N+1) x (N+1) samples (default 256)"},

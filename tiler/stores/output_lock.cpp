@@ -8,6 +8,7 @@
 
 #include "core/error.hpp"
 #include "tiler/log.hpp"
+#include "tiler/stores/store.hpp"
 
 #include <cerrno>
 #include <chrono>
@@ -35,13 +36,9 @@ constexpr auto kPoll = std::chrono::milliseconds(20);
     throw IoError(path + ": cannot " + what + " (" + std::strerror(err) + ")");
 }
 
-bool ends_with(const std::string& s, const std::string& tail) {
-    return s.size() >= tail.size() && s.compare(s.size() - tail.size(), tail.size(), tail) == 0;
-}
-
-// As TileStore::open: these suffixes make an SQLite store, anything else a directory.
+// As TileStore::open: these suffixes make a single-file store, anything else a directory.
 bool single_file(const std::string& output) {
-    return ends_with(output, ".sqlite") || ends_with(output, ".db");
+    return is_single_file_store(output);
 }
 
 // As the stores: a missing parent is more likely a typo than a wish for a new tree.

@@ -2,9 +2,11 @@
 #include "tiler/stores/store.hpp"
 
 #include "core/error.hpp"
+#include "tiler/stores/store_mbtiles.hpp"
 
 #include <memory>
 #include <string>
+#include <vector>
 
 namespace tb::tiler {
 
@@ -43,7 +45,45 @@ std::unique_ptr<TileStore> TileStore::open(const std::string& path) {
     if (ends_with(path, ".sqlite") || ends_with(path, ".db")) {
         return open_sqlite_store(path);
     }
+    if (ends_with(path, ".mbtiles")) {
+        return std::make_unique<MbtilesStore>(path);
+    }
     return open_directory_store(path);
+}
+
+bool is_single_file_store(const std::string& path) {
+    for (const char* suffix : {".sqlite", ".db", ".mbtiles"}) {
+        if (ends_with(path, suffix)) {
+            return true;
+        }
+    }
+    return false;
+}
+
+void check_store_formats(const std::string& path, std::span<const Format> formats) {
+    if (!ends_with(path, ".mbtiles")) {
+        return;
+    }
+    const std::string kind = "an MBTiles file";
+    std::vector<std::string> dem;
+    for (Format f : formats) {
+        if (!is_dem_format(f)) {
+            throw InputError(path + ": " + kind +
+                             " holds raster DEM tiles (terrarium or mapbox, EPSG:3857 XYZ PNG) "
+                             "only, not " +
+                             format_name(f) +
+                             "; build --formats terrarium (or mapbox) into it, and mesh formats "
+                             "into a directory or an .sqlite file");
+        }
+        dem.push_back(format_name(f));
+    }
+    if (dem.size() != 1) {
+        throw InputError(path + ": " + kind +
+                         " holds exactly one DEM encoding, and --formats names " +
+                         (dem.empty() ? std::string("none") : dem[0] + " and " + dem[1]) +
+                         "; build each encoding into its own file (--formats terrarium -o "
+                         "A.mbtiles, then --formats mapbox -o B.mbtiles)");
+    }
 }
 
 void TileStore::put_batch(std::span<const StoredTile> tiles) {

@@ -1,15 +1,17 @@
 #pragma once
-// Tile stores: where encoded tiles live once made. Two stores behind one interface:
+// Tile stores: where encoded tiles live once made. Three stores behind one interface:
 //   directory: OUT/{layer}/{z}/{x}/{y}.{ext}, eps variants under
 //   OUT/{layer}/eps{k}/{z}/{x}/{y}.{ext}, raster DEM tiles under OUT/{layer}/dem/{z}/{x}/{y}.png
 //              (terrarium) and OUT/{layer}/dem/mapbox/{z}/{x}/{y}.png,
 //              documents at OUT/{layer}/{name} (name may hold '/': "subtrees/0/0/0.subtree");
 //   SQLite:    one file (*.sqlite or *.db), WAL, tables tiles(layer, format, eps_level, z, x, y,
 //              data), documents(layer, name, data) and meta(name, value).
+//   MBTiles:   OUT.mbtiles, one layer's raster DEM tiles in one encoding, as MBTiles 1.3 has
+//              them (tiler/stores/store_mbtiles.hpp); a build's documents in an extra table.
 // Every write is atomic: a reader never sees a truncated tile or document. The directory store
 // writes a temporary file next to the target, fsyncs it and renames it over the target; the
 // SQLite store commits each put (or each put_batch) as one transaction.
-// Both stores are safe to use from many threads at once.
+// Every store is safe to use from many threads at once.
 #include "tiler/formats/format.hpp"
 #include "tiler/tile_grid.hpp"
 
@@ -37,8 +39,10 @@ class TileStore {
 public:
     virtual ~TileStore() = default;
 
-    // A path ending in .sqlite (or .db) opens/creates an SQLite store, anything else a
-    // directory store. Throws IoError naming the path when it cannot be opened or created.
+    // A path ending in .sqlite (or .db) opens/creates an SQLite store, .mbtiles an MBTiles 1.3
+    // file (raster DEM tiles of one layer in one encoding), anything else a directory store. Throws
+    // IoError naming the path when it cannot be opened or created, InputError when an existing
+    // container is not one Terrabound reads.
     static std::unique_ptr<TileStore> open(const std::string& path);
 
     // Keys and document names are validated first (validate_key, validate_document_name):
@@ -64,11 +68,23 @@ public:
     // after a crash). Call only while no other process writes the layer.
     virtual void clean_up(const std::string& layer) = 0;
 
+    // Called by the builder once every tile and document of a build is in (not after an
+    // interrupted or failed run, nor by a shard): containers written once assemble themselves
+    // here (PMTiles), MBTiles records its bounds and zooms. The other stores have nothing to do.
+    virtual void finish() {}
+
     virtual std::string describe() const = 0; // "directory OUT" / "sqlite OUT.sqlite"
     // True when only Terrabound writes what the store holds (an SQLite store's tables), false
     // when other programs may have put files there too (a directory).
     virtual bool written_by_terrabound_only() const = 0;
 };
+
+// True for the paths TileStore::open makes a single-file store of (.sqlite, .db, .mbtiles).
+bool is_single_file_store(const std::string& path);
+// Throws InputError naming the problem and what to do when the store at `path` cannot hold
+// tiles of every one of `formats`: an .mbtiles file holds exactly one raster DEM
+// encoding (terrarium or mapbox), which tiles EPSG:3857 XYZ as those containers do.
+void check_store_formats(const std::string& path, std::span<const Format> formats);
 
 // Layer names are URL-safe: [A-Za-z0-9_-]+, at most 64 characters. InputError otherwise.
 void validate_layer_name(const std::string& layer);
