@@ -854,6 +854,7 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
                                   "every shard reported (see the warning above); run each shard "
                                   "again with --resume");
         }
+        store->finish();
         log::info("build: finalized " + std::to_string(shard_count) + " shard(s), " +
                   std::to_string(reported) + " tiles");
         summary.seconds = std::chrono::duration<double>(Clock::now() - start).count();
@@ -1068,6 +1069,7 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
                 write_terrain_tileset(*layer, *store, name);
             }
             write_static_hosting(o, *layer, *store, name);
+            store->finish();
         }
     }
     summary.over_eps = static_cast<std::int64_t>(layer->tiles_over_eps());
