@@ -228,8 +228,8 @@ const Command& build_command() {
          {
              {"o",
               "OUT",
-              "output: a directory, a file ending in .sqlite (or .db), or OUT.mbtiles (MBTiles 1.3 "
-              "of one DEM encoding: --formats terrarium or mapbox)"},
+              "output: a directory, a file ending in .sqlite (or .db), or OUT.mbtiles (MBTiles 1.3) "
+              "or OUT.pmtiles (PMTiles v3) of one DEM encoding: --formats terrarium or mapbox"},
              {"layer", "NAME", "layer name, [A-Za-z0-9_-]+ (default terrain)"},
              {"scheme", "S", "geodetic (default) or mercator"},
              {"size", "N", "tile raster is (N+1) x (N+1) samples (default 256)"},

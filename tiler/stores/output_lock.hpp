@@ -3,11 +3,11 @@
 // reads or writes anything there until it returns, so that two builds never mix their tiles.
 //
 // Where: for a directory OUT, the file OUT/.build.lock; for a single-file store OUT.sqlite (or
-// .db, .mbtiles), the sibling OUT.sqlite.build.lock, next to SQLite's own -wal and -shm. Neither is
-// a tile or a document: `serve` never answers it (document names cannot start with '.', and nothing
-// outside OUT/{layer}/ is served), and the last holder removes it on its way out, so a finished
-// output holds no lock file for static hosting to publish. A process killed with SIGKILL leaves
-// the file behind, but not the lock.
+// .db, .mbtiles, .pmtiles), the sibling OUT.sqlite.build.lock, next to SQLite's own -wal and -shm.
+// Neither is a tile or a document: `serve` never answers it (document names cannot start with '.',
+// and nothing outside OUT/{layer}/ is served), and the last holder removes it on its way out, so a
+// finished output holds no lock file for static hosting to publish. A process killed with SIGKILL
+// leaves the file behind, but not the lock.
 //
 // How: flock(2) on that file. The kernel drops the lock when its holder exits or dies (kill -9
 // included), so a file left by a dead process never blocks the next build, which takes it over.

@@ -12,6 +12,7 @@ namespace tb::tiler {
 
 std::unique_ptr<TileStore> open_directory_store(const std::string& path); // store_dir.cpp
 std::unique_ptr<TileStore> open_sqlite_store(const std::string& path);    // store_sqlite.cpp
+std::unique_ptr<TileStore> open_pmtiles_store(const std::string& path);   // store_pmtiles.cpp
 
 namespace {
 
@@ -48,11 +49,14 @@ std::unique_ptr<TileStore> TileStore::open(const std::string& path) {
     if (ends_with(path, ".mbtiles")) {
         return std::make_unique<MbtilesStore>(path);
     }
+    if (ends_with(path, ".pmtiles")) {
+        return open_pmtiles_store(path);
+    }
     return open_directory_store(path);
 }
 
 bool is_single_file_store(const std::string& path) {
-    for (const char* suffix : {".sqlite", ".db", ".mbtiles"}) {
+    for (const char* suffix : {".sqlite", ".db", ".mbtiles", ".pmtiles"}) {
         if (ends_with(path, suffix)) {
             return true;
         }
@@ -61,10 +65,12 @@ bool is_single_file_store(const std::string& path) {
 }
 
 void check_store_formats(const std::string& path, std::span<const Format> formats) {
-    if (!ends_with(path, ".mbtiles")) {
+    const bool mbtiles = ends_with(path, ".mbtiles");
+    if (!mbtiles && !ends_with(path, ".pmtiles")) {
         return;
     }
-    const std::string kind = "an MBTiles file";
+    const std::string kind = mbtiles ? "an MBTiles file" : "a PMTiles archive";
+    const std::string ext = mbtiles ? ".mbtiles" : ".pmtiles";
     std::vector<std::string> dem;
     for (Format f : formats) {
         if (!is_dem_format(f)) {
@@ -81,8 +87,8 @@ void check_store_formats(const std::string& path, std::span<const Format> format
         throw InputError(path + ": " + kind +
                          " holds exactly one DEM encoding, and --formats names " +
                          (dem.empty() ? std::string("none") : dem[0] + " and " + dem[1]) +
-                         "; build each encoding into its own file (--formats terrarium -o "
-                         "A.mbtiles, then --formats mapbox -o B.mbtiles)");
+                         "; build each encoding into its own file (--formats terrarium -o A" + ext +
+                         ", then --formats mapbox -o B" + ext + ")");
     }
 }
 

@@ -1,5 +1,5 @@
 #pragma once
-// Tile stores: where encoded tiles live once made. Three stores behind one interface:
+// Tile stores: where encoded tiles live once made. Four stores behind one interface:
 //   directory: OUT/{layer}/{z}/{x}/{y}.{ext}, eps variants under
 //   OUT/{layer}/eps{k}/{z}/{x}/{y}.{ext}, raster DEM tiles under OUT/{layer}/dem/{z}/{x}/{y}.png
 //              (terrarium) and OUT/{layer}/dem/mapbox/{z}/{x}/{y}.png,
@@ -8,6 +8,8 @@
 //              data), documents(layer, name, data) and meta(name, value).
 //   MBTiles:   OUT.mbtiles, one layer's raster DEM tiles in one encoding, as MBTiles 1.3 has
 //              them (tiler/stores/store_mbtiles.hpp); a build's documents in an extra table.
+//   PMTiles:   OUT.pmtiles, the same tiles as a PMTiles v3 archive, staged in OUT.pmtiles.staging
+//              while built and assembled by finish() (tiler/stores/store_pmtiles.cpp).
 // Every write is atomic: a reader never sees a truncated tile or document. The directory store
 // writes a temporary file next to the target, fsyncs it and renames it over the target; the
 // SQLite store commits each put (or each put_batch) as one transaction.
@@ -40,7 +42,8 @@ public:
     virtual ~TileStore() = default;
 
     // A path ending in .sqlite (or .db) opens/creates an SQLite store, .mbtiles an MBTiles 1.3
-    // file (raster DEM tiles of one layer in one encoding), anything else a directory store. Throws
+    // file and .pmtiles a PMTiles v3 archive (raster DEM tiles of one layer in one encoding),
+    // anything else a directory store. Throws
     // IoError naming the path when it cannot be opened or created, InputError when an existing
     // container is not one Terrabound reads.
     static std::unique_ptr<TileStore> open(const std::string& path);
@@ -79,10 +82,11 @@ public:
     virtual bool written_by_terrabound_only() const = 0;
 };
 
-// True for the paths TileStore::open makes a single-file store of (.sqlite, .db, .mbtiles).
+// True for the paths TileStore::open makes a single-file store of (.sqlite, .db, .mbtiles,
+// .pmtiles).
 bool is_single_file_store(const std::string& path);
 // Throws InputError naming the problem and what to do when the store at `path` cannot hold
-// tiles of every one of `formats`: an .mbtiles file holds exactly one raster DEM
+// tiles of every one of `formats`: an .mbtiles or .pmtiles file holds exactly one raster DEM
 // encoding (terrarium or mapbox), which tiles EPSG:3857 XYZ as those containers do.
 void check_store_formats(const std::string& path, std::span<const Format> formats);
 
