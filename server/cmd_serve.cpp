@@ -12,6 +12,7 @@
 #include "tiler/sources/gdal_source.hpp"
 #include "tiler/stores/store.hpp"
 
+#include <malloc.h>
 #include <pthread.h>
 #include <signal.h>
 #include <time.h>
@@ -87,17 +88,40 @@ config::Config config_from_dems(const std::vector<std::string>& dems) {
     return cfg;
 }
 
+// With a budget, malloc keeps at most this many arenas per generation thread (at least 2)
+// unless MALLOC_ARENA_MAX says otherwise. glibc's default, 8 per core, gives each of the many
+// HTTP and generation threads an arena of its own, and the freed pages of a tile's transient
+// buffers stay in them: the load benchmark peaked at 1.22-1.28x memory_mb 512 so, and at 1.10x
+// with 2 arenas (bench/README.md, "Load").
+constexpr int kArenasPerThread = 1;
+
+// Bounds malloc's arenas for a budget (see kArenasPerThread); returns the bound, 0 when left
+// to glibc (no budget, or MALLOC_ARENA_MAX set).
+int limit_malloc_arenas(const config::ServerConfig& server, int threads) {
+    if (server.memory_mb == 0 || std::getenv("MALLOC_ARENA_MAX") != nullptr) {
+        return 0;
+    }
+    const int arenas = std::max(2, kArenasPerThread * threads);
+    if (mallopt(M_ARENA_MAX, arenas) != 1) {
+        log::debug("mallopt(M_ARENA_MAX) failed; malloc keeps its default arenas");
+        return 0;
+    }
+    return arenas;
+}
+
 // Splits the process's memory: GDAL's block cache gets a quarter of the budget (without one,
 // it stays as init_gdal left it: 64 MiB, or GDAL_CACHEMAX), the tile cache cache_mb capped to
-// half of it, the rest is left to tile generation, queues and connections. Sets GDAL's cache,
-// logs the split in one line, and returns the tile cache's bytes. Call before any DEM is read.
-std::size_t split_memory(const config::ServerConfig& server) {
+// half of it, the rest is left to tile generation, queues and connections, and malloc's arenas
+// are bounded. Sets GDAL's cache, logs the split in one line, and returns the tile cache's
+// bytes. Call before any DEM is read and before the server's threads start.
+std::size_t split_memory(const config::ServerConfig& server, int threads) {
     const std::size_t budget = server.memory_mb;
     const std::size_t gdal_mb = budget / 4;
     const std::size_t cache_mb = budget ? std::min(server.cache_mb, budget / 2) : server.cache_mb;
     if (budget) {
         tiler::set_block_cache_mb(gdal_mb);
     }
+    const int arenas = limit_malloc_arenas(server, threads);
     std::string line = budget ? "memory: " + std::to_string(budget) + " MiB budget: tile cache "
                               : "memory: no budget (memory_mb): tile cache ";
     line += std::to_string(cache_mb) + " MiB";
@@ -109,6 +133,9 @@ std::size_t split_memory(const config::ServerConfig& server) {
     if (budget) {
         line += ", " + std::to_string(budget - cache_mb - gdal_mb) +
                 " MiB left for tile generation and connections";
+    }
+    if (arenas > 0) {
+        line += ", malloc arenas at most " + std::to_string(arenas);
     }
     log::info(line);
     return cache_mb << 20;
@@ -365,9 +392,9 @@ int run(const Args& args) {
     StopSignals signals;
     const config::Config cfg = load_serve_config(args);
     server::Metrics metrics;
-    const std::size_t cache_bytes = split_memory(cfg.server); // before any DEM is read
-    OpenedLayers opened = open_layers(cfg);
     const int threads = cfg.server.threads > 0 ? cfg.server.threads : tiler::usable_cpus();
+    const std::size_t cache_bytes = split_memory(cfg.server, threads); // before any DEM is read
+    OpenedLayers opened = open_layers(cfg);
 
     server::TileServiceOptions tile_options;
     tile_options.cache_bytes = cache_bytes;

@@ -33,17 +33,21 @@ TEST_CASE("serve splits --memory-mb between GDAL's block cache and the tile cach
     // Without a budget: GDAL gets 64 MiB instead of its 5 % of the RAM; cache_mb as given.
     CHECK(memory_line(dir, {dem}) ==
           "memory: no budget (memory_mb): tile cache 256 MiB, GDAL block cache 64 MiB");
-    // A budget: GDAL a quarter, the tile cache (256 MiB by default) capped to half.
-    CHECK(memory_line(dir, {dem, "--memory-mb", "256"}) ==
+    // A budget: GDAL a quarter, the tile cache (256 MiB by default) capped to half, malloc's
+    // arenas bounded (one per generation thread, at least 2).
+    CHECK(memory_line(dir, {dem, "--memory-mb", "256", "--threads", "1"}) ==
           "memory: 256 MiB budget: tile cache 128 MiB (cache_mb 256 capped to half the budget), "
-          "GDAL block cache 64 MiB, 64 MiB left for tile generation and connections");
+          "GDAL block cache 64 MiB, 64 MiB left for tile generation and connections, malloc "
+          "arenas at most 2");
+    CHECK(memory_line(dir, {dem, "--memory-mb", "256", "--threads", "3"})
+              .find(", malloc arenas at most 3") != std::string::npos);
     // From the config, with a cache_mb that fits; --memory-mb over it.
     const std::string config = dir / "serve.json";
     test::write_file(config, R"({"server": {"threads": 1, "memory_mb": 2048, "cache_mb": 100},
                                  "layers": [{"name": "hills", "sources": ["hills.asc"]}]})");
     CHECK(memory_line(dir, {config}) ==
           "memory: 2048 MiB budget: tile cache 100 MiB, GDAL block cache 512 MiB, 1436 MiB left "
-          "for tile generation and connections");
+          "for tile generation and connections, malloc arenas at most 2");
     CHECK(memory_line(dir, {config, "--memory-mb", "0"}) ==
           "memory: no budget (memory_mb): tile cache 100 MiB, GDAL block cache 64 MiB");
 
