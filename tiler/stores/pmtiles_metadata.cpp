@@ -5,7 +5,6 @@
 #include "tiler/json_number.hpp"
 #include "tiler/stores/pmtiles_format.hpp"
 
-#include <utility>
 #include <vector>
 
 namespace tb::tiler::pmtiles {
@@ -14,22 +13,26 @@ namespace {
 struct Json {
     enum class Kind { Null, Bool, Number, String, Array, Object } kind = Kind::Null;
     std::string text; // a string's bytes
-    std::vector<std::pair<std::string, Json>> members;
+    // An object's members as two parallel vectors: a vector of pair<string, Json> would need
+    // Json complete inside its own definition.
+    std::vector<std::string> keys;
+    std::vector<Json> values;
     std::vector<Json> items;
-
-    const Json* member(const std::string& key) const {
-        for (const auto& [k, v] : members) {
-            if (k == key) {
-                return &v;
-            }
-        }
-        return nullptr;
-    }
-    std::string string_at(const std::string& key) const {
-        const Json* v = member(key);
-        return v && v->kind == Kind::String ? v->text : std::string();
-    }
 };
+
+const Json* member(const Json& object, const std::string& key) {
+    for (std::size_t i = 0; i < object.keys.size(); ++i) {
+        if (object.keys[i] == key) {
+            return &object.values[i];
+        }
+    }
+    return nullptr;
+}
+
+std::string string_at(const Json& object, const std::string& key) {
+    const Json* v = member(object, key);
+    return v && v->kind == Json::Kind::String ? v->text : std::string();
+}
 
 class Parser {
 public:
@@ -95,7 +98,8 @@ private:
                 }
                 std::string key = string();
                 expect(':');
-                v.members.emplace_back(std::move(key), value(depth + 1));
+                v.keys.push_back(std::move(key));
+                v.values.push_back(value(depth + 1));
             } while (peek() == ',' && ++at_);
             expect('}');
         } else if (c == '[') {
@@ -268,20 +272,20 @@ ArchiveContent parse_metadata(std::string_view json, const std::string& name) {
         throw InputError(name + ": the metadata is not a JSON object; the file is damaged");
     }
     ArchiveContent c;
-    const Json* ours = doc.member("terrabound");
+    const Json* ours = member(doc, "terrabound");
     if (ours && ours->kind == Json::Kind::Object) {
-        c.layer = ours->string_at("layer");
-        c.encoding = ours->string_at("encoding");
-        if (const Json* docs = ours->member("documents")) {
-            for (const auto& [key, v] : docs->members) {
-                if (v.kind == Json::Kind::String) {
-                    c.documents[key] = v.text;
+        c.layer = string_at(*ours, "layer");
+        c.encoding = string_at(*ours, "encoding");
+        if (const Json* docs = member(*ours, "documents")) {
+            for (std::size_t i = 0; i < docs->keys.size(); ++i) {
+                if (docs->values[i].kind == Json::Kind::String) {
+                    c.documents[docs->keys[i]] = docs->values[i].text;
                 }
             }
         }
     } else {
-        c.layer = doc.string_at("name");
-        c.encoding = doc.string_at("encoding");
+        c.layer = string_at(doc, "name");
+        c.encoding = string_at(doc, "encoding");
     }
     return c;
 }
