@@ -257,7 +257,8 @@ void parse_server(Checker& check, const json& value, ServerConfig& out) {
                       "metrics",
                       "memory_mb",
                       "start_wait_ms",
-                      "deadline_ms"});
+                      "deadline_ms",
+                      "watch_interval_s"});
     if (value.contains("host")) {
         if (auto s = check.string(value["host"], at + "/host")) {
             if (const auto problem = host_problem(*s)) {
@@ -296,6 +297,12 @@ void parse_server(Checker& check, const json& value, ServerConfig& out) {
         }
     }
     parse_waits(check, value, at, out);
+    if (value.contains("watch_interval_s")) {
+        if (auto v = check.integer(
+                value["watch_interval_s"], at + "/watch_interval_s", 0, kMaxWatchIntervalS)) {
+            out.watch_interval_s = static_cast<int>(*v);
+        }
+    }
     if (value.contains("queue_limit")) {
         if (auto v = check.integer(value["queue_limit"], at + "/queue_limit", 0, kMaxQueueLimit)) {
             out.queue_limit = static_cast<int>(*v);

@@ -18,6 +18,7 @@ namespace tb::config {
 // The smallest memory budget (ServerConfig::memory_mb) but none: a quarter of it, GDAL's block
 // cache, still holds a few hundred blocks.
 inline constexpr std::size_t kMinMemoryMb = 64;
+inline constexpr int kMaxWatchIntervalS = 86400;
 inline constexpr std::size_t kMaxMemoryMb = std::size_t{1} << 20; // 1 TiB, as cache_mb
 
 struct ServerConfig {
@@ -38,6 +39,9 @@ struct ServerConfig {
     // How long a tile request may take in all; past it: 503 with Retry-After, and a generation
     // no request waits for any more stops (TileServiceOptions::deadline). At least start_wait_ms.
     int deadline_ms = 10000;
+    // How often serve checks its layers' source files (size and modification time) and reloads
+    // a layer whose sources changed, in seconds; 0: only on SIGHUP.
+    int watch_interval_s = 5;
 };
 
 struct LayerConfig {

@@ -3,10 +3,10 @@
 #include "core/error.hpp"
 #include "server/commands.hpp"
 #include "server/http_server.hpp"
+#include "server/layer_reload.hpp"
 #include "server/metrics.hpp"
 #include "server/tile_service.hpp"
 #include "tiler/cpus.hpp"
-#include "tiler/formats/quantized_mesh.hpp"
 #include "tiler/log.hpp"
 #include "tiler/pyramid/tile_settings.hpp"
 #include "tiler/sources/gdal_source.hpp"
@@ -171,16 +171,18 @@ std::string sources_text(const std::vector<std::string>& sources) {
     }
 }
 
-// Owns SIGINT and SIGTERM for the whole command: they are blocked in this thread and in every
-// thread started afterwards (HTTP, generation), and one waiter thread takes them with
-// sigtimedwait. While the server starts (opening DEMs can take a while), a signal exits at
-// once; once serving() is called, it stops the server gracefully instead.
+// Owns SIGINT, SIGTERM and SIGHUP for the whole command: they are blocked in this thread and in
+// every thread started afterwards (HTTP, generation), and one waiter thread takes them with
+// sigtimedwait. While the server starts (opening DEMs can take a while), SIGINT and SIGTERM exit
+// at once; once serving() is called, they stop the server gracefully instead. SIGHUP asks the
+// layer watcher to check the sources now (ignored, with a log line, before it runs).
 class StopSignals {
 public:
     StopSignals() {
         sigemptyset(&set_);
         sigaddset(&set_, SIGINT);
         sigaddset(&set_, SIGTERM);
+        sigaddset(&set_, SIGHUP);
         pthread_sigmask(SIG_BLOCK, &set_, nullptr);
         waiter_ = std::thread([this] { wait(); });
     }
@@ -189,6 +191,8 @@ public:
     StopSignals& operator=(const StopSignals&) = delete;
 
     void serving(server::HttpServer& http) { http_ = &http; }
+    // Where SIGHUP goes from now on (nullptr: nowhere); call with nullptr before it goes away.
+    void reloading(server::LayerWatcher* watcher) { watcher_ = watcher; }
     // Ends the waiter; call before the server it stops goes away.
     void finish() {
         done_ = true;
@@ -202,6 +206,14 @@ private:
         const timespec tick{0, 200 * 1000 * 1000};
         while (!done_) {
             const int signal_number = sigtimedwait(&set_, nullptr, &tick);
+            if (signal_number == SIGHUP) {
+                if (server::LayerWatcher* watcher = watcher_) {
+                    watcher->check_now();
+                } else {
+                    log::info("received SIGHUP while starting; ignored");
+                }
+                continue;
+            }
             if (signal_number != SIGINT && signal_number != SIGTERM) {
                 continue;
             }
@@ -220,6 +232,7 @@ private:
     sigset_t set_;
     std::atomic<bool> done_{false};
     std::atomic<server::HttpServer*> http_{nullptr};
+    std::atomic<server::LayerWatcher*> watcher_{nullptr};
     std::thread waiter_;
 };
 
@@ -326,19 +339,21 @@ config::Config load_serve_config(const Args& args) {
 struct OpenedLayers {
     std::vector<server::ServedLayer> served;
     std::vector<server::UnavailableLayer> unavailable;
+    server::Stores stores;
+    std::vector<std::vector<std::string>> stamps; // per config layer, taken before opening it
 };
 
 // The config's layers and their stores. A layer whose sources fail to open is logged and answers
 // 503; any other failure (a store), or every layer failing, stops before listening.
 OpenedLayers open_layers(const config::Config& cfg) {
-    std::map<std::string, std::shared_ptr<tiler::TileStore>> stores;
     OpenedLayers opened;
     std::vector<std::string> failures; // logged once the others are known to open
     std::exception_ptr first_failure;
     for (const auto& layer : cfg.layers) {
+        opened.stamps.push_back(server::source_stamps(layer.options.sources));
         server::ServedLayer s;
         try {
-            s.layer = tiler::Layer::open(layer.options);
+            s = server::open_served_layer(layer);
         } catch (const Error& e) {
             failures.push_back("layer " + layer.options.name + " (" +
                                sources_text(layer.options.sources) + "): " + e.what());
@@ -348,28 +363,7 @@ OpenedLayers open_layers(const config::Config& cfg) {
             }
             continue;
         }
-        s.formats = layer.formats;
-        if (layer.store) {
-            auto& store = stores[*layer.store];
-            if (!store) {
-                store = tiler::TileStore::open(*layer.store);
-                log::info("store: " + store->describe());
-            }
-            // Tiles made with other settings would publish bounds that are not this layer's.
-            const tiler::StoreUse use = tiler::prepare_store_for_serving(*store, *s.layer);
-            s.store_eps_levels = use.eps_levels;
-            // A build that kept only some extensions cannot answer a client asking for more.
-            s.store_terrain = use.terrain_extensions.empty() ||
-                              use.terrain_extensions ==
-                                  tiler::terrain_extensions_json(tiler::kAllQuantizedMeshExtensions);
-            if (!s.store_terrain) {
-                log::info("store: layer " + layer.options.name + ": its .terrain tiles hold only " +
-                          use.terrain_extensions +
-                          " (build --terrain-extensions); serve makes them with every extension "
-                          "instead, and keeps them in memory only");
-            }
-            s.store = store;
-        }
+        server::attach_store(s, layer, opened.stores);
         log::info("layer " + layer.options.name + ": zooms " + std::to_string(s.layer->min_zoom()) +
                   ".." + std::to_string(s.layer->max_zoom()));
         opened.served.push_back(std::move(s));
@@ -413,29 +407,34 @@ int run(const Args& args) {
     http_options.metrics = server::parse_metrics_access(cfg.server.metrics, "metrics");
     http_options.web_root = find_web_root(args);
     if (!http_options.web_root.empty()) {
-        for (const auto& layer : tiles.layers()) {
-            if (layer.layer->options().name == "web") {
-                throw InputError("layer name 'web' is taken by the viewer's files; rename the "
-                                 "layer or pass --web none");
-            }
+        if (tiles.find("web")) {
+            throw InputError("layer name 'web' is taken by the viewer's files; rename the layer "
+                             "or pass --web none");
         }
         log::info("viewer: " + http_options.web_root);
     }
     server::HttpServer http(tiles, metrics, http_options);
     const int port = http.bind();
 
+    server::LayerWatcher watcher(tiles,
+                                 cfg.layers,
+                                 std::move(opened.stamps),
+                                 opened.stores,
+                                 std::chrono::seconds(cfg.server.watch_interval_s));
+    signals.reloading(&watcher);
     signals.serving(http);
 
     const std::string shown_host = cfg.server.host == "0.0.0.0" ? "localhost" : cfg.server.host;
     log::info("serving http://" + shown_host + ":" + std::to_string(port) + "/ (" +
-              std::to_string(tiles.layers().size()) + " layer(s)" +
-              (tiles.unavailable().empty()
+              std::to_string(tiles.layers()->served.size()) + " layer(s)" +
+              (tiles.layers()->unavailable.empty()
                    ? std::string()
-                   : ", " + std::to_string(tiles.unavailable().size()) + " unavailable") +
+                   : ", " + std::to_string(tiles.layers()->unavailable.size()) + " unavailable") +
               ", " + std::to_string(threads) +
               " generation thread(s)); open it in a browser, stop with Ctrl-C");
     http.run();
 
+    signals.reloading(nullptr);
     signals.finish();
     log::info("stopped");
     return 0;

@@ -6,11 +6,11 @@
 #include "core/error.hpp"
 #include "tiler/cpus.hpp"
 #include "tiler/dem_tiles.hpp"
-#include "tiler/pyramid/hosting.hpp"
 #include "tiler/formats/quantized_mesh.hpp"
 #include "tiler/formats/terrain_tiles.hpp"
 #include "tiler/json_number.hpp"
 #include "tiler/log.hpp"
+#include "tiler/pyramid/hosting.hpp"
 #include "tiler/tile_grid.hpp"
 
 #include <httplib.h>
@@ -1214,7 +1214,8 @@ struct HttpServer::Impl {
         std::ostringstream out;
         out << "{\"layers\":[";
         bool first = true;
-        for (const auto& served : tiles.layers()) {
+        const auto set = tiles.layers();
+        for (const auto& served : set->served) {
             const auto& layer = *served.layer;
             const auto& o = layer.options();
             const auto b = layer.data_bounds();
@@ -1255,7 +1256,7 @@ struct HttpServer::Impl {
         // Layers that failed to open at startup: their routes answer 503 with this reason.
         out << "],\"unavailable\":[";
         first = true;
-        for (const auto& u : tiles.unavailable()) {
+        for (const auto& u : set->unavailable) {
             out << (first ? "" : ",") << "{\"name\":\"" << json_escape(u.name) << "\",\"error\":\""
                 << json_escape(u.reason) << "\"}";
             first = false;
@@ -1291,21 +1292,22 @@ struct HttpServer::Impl {
     std::string
     tilejson(const ServedLayer& served, tiler::Format encoding, const std::string& origin) const {
         const std::string& name = served.layer->options().name;
-        return tiler::dem_tilejson(*served.layer,
-                                   encoding,
-                                   origin + "/" + name + "/dem/{z}/{x}/{y}.png?encoding=" +
-                                       tiler::format_name(encoding));
+        return tiler::dem_tilejson(
+            *served.layer,
+            encoding,
+            origin + "/" + name + "/dem/{z}/{x}/{y}.png?encoding=" + tiler::format_name(encoding));
     }
 
     // The layer, which must serve `format` (NotFound otherwise).
-    const ServedLayer& serving(const std::string& name, tiler::Format format) const {
-        const ServedLayer* served = &tiles.require(name);
+    std::shared_ptr<const ServedLayer> serving(const std::string& name,
+                                               tiler::Format format) const {
+        std::shared_ptr<const ServedLayer> served = tiles.require(name);
         if (std::find(served->formats.begin(), served->formats.end(), format) ==
             served->formats.end()) {
             throw NotFound("layer '" + name + "' does not serve " + tiler::format_name(format) +
                            " DEM tiles");
         }
-        return *served;
+        return served;
     }
 
     std::string landing_html() const {
@@ -1317,7 +1319,8 @@ struct HttpServer::Impl {
                "<a href=\"/layers\">/layers</a>. Metrics: <a href=\"/metrics\">/metrics</a>."
                "</p>\n<table><tr><th>layer</th><th>zooms</th><th>tileset</th>"
                "<th>sample tile</th></tr>\n";
-        for (const auto& served : tiles.layers()) {
+        const auto set = tiles.layers();
+        for (const auto& served : set->served) {
             const auto& layer = *served.layer;
             const std::string name = html_escape(layer.options().name);
             const int z = layer.min_zoom();
@@ -1336,7 +1339,7 @@ struct HttpServer::Impl {
             }
             out << "</td></tr>\n";
         }
-        for (const auto& u : tiles.unavailable()) {
+        for (const auto& u : set->unavailable) {
             out << "<tr><td>" << html_escape(u.name)
                 << "</td><td colspan=\"3\">unavailable: " << html_escape(u.reason)
                 << "</td></tr>\n";
@@ -1489,7 +1492,8 @@ struct HttpServer::Impl {
             text += "# HELP tb_tiles_over_eps Tiles made whose error measured at the source's "
                     "pixels exceeds their zoom's eps (they publish the larger bound).\n"
                     "# TYPE tb_tiles_over_eps gauge\n";
-            for (const auto& served : tiles.layers()) {
+            const auto set = tiles.layers();
+            for (const auto& served : set->served) {
                 text += "tb_tiles_over_eps{layer=\"" + served.layer->options().name + "\"} " +
                         std::to_string(served.layer->tiles_over_eps()) + "\n";
             }
@@ -1497,7 +1501,7 @@ struct HttpServer::Impl {
                     "startup (their routes answer 503).\n"
                     "# TYPE tb_layers_unavailable gauge\n"
                     "tb_layers_unavailable " +
-                    std::to_string(tiles.unavailable().size()) + "\n";
+                    std::to_string(set->unavailable.size()) + "\n";
             res.set_content(text, "text/plain; version=0.0.4; charset=utf-8");
         });
 
@@ -1517,10 +1521,10 @@ struct HttpServer::Impl {
                    [this](const httplib::Request& req, httplib::Response& res) {
                        t_request.route = "tilejson";
                        const tiler::Format encoding = dem_encoding(req);
-                       const ServedLayer& served = serving(req.matches[1].str(), encoding);
+                       const auto served = serving(req.matches[1].str(), encoding);
                        Blob blob;
                        blob.bytes =
-                           tilejson(served, encoding, public_origin(req, options.host, port));
+                           tilejson(*served, encoding, public_origin(req, options.host, port));
                        blob.etag = make_etag(blob.bytes);
                        send_blob(req, res, blob, "application/json", kDocumentCacheControl);
                        res.set_header("Vary", "Accept-Encoding");

@@ -19,6 +19,8 @@
 #include <list>
 #include <map>
 #include <mutex>
+#include <optional>
+#include <shared_mutex>
 #include <thread>
 #include <unordered_map>
 
@@ -99,6 +101,21 @@ public:
         }
         it->second->charged += size;
         bytes_ += size;
+        trim();
+    }
+
+    // Drops every entry whose key starts with one of `prefixes`.
+    void erase_prefixed(const std::vector<std::string>& prefixes) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        for (auto it = order_.begin(); it != order_.end();) {
+            const auto next = std::next(it);
+            if (std::any_of(prefixes.begin(), prefixes.end(), [&](const std::string& p) {
+                    return it->key.compare(0, p.size(), p) == 0;
+                })) {
+                erase(it);
+            }
+            it = next;
+        }
         trim();
     }
 
@@ -260,7 +277,7 @@ struct Flight {
 
 // A tile request past its checks.
 struct TileRequest {
-    const ServedLayer* served;
+    std::shared_ptr<const ServedLayer> served; // as the request found it: one layer throughout
     std::string layer;
     tiler::TileId id;
     tiler::Format format;
@@ -278,12 +295,40 @@ struct TileRequest {
 } // namespace
 
 struct TileService::Impl {
-    Impl(const TileServiceOptions& o, Metrics& m)
-        : options(o), metrics(m), cache(o.cache_bytes, m), pool(o.threads, lower_priority) {}
+    Impl(const TileServiceOptions& o, Metrics& m, const TileService& service)
+        : options(o), metrics(m), cache(o.cache_bytes, m), owner(service),
+          pool(o.threads, lower_priority) {}
 
     TileServiceOptions options; // start_wait at most deadline
     Metrics& metrics;
     LruCache cache;
+    const TileService& owner;
+    // Held shared while a tile or document is cached or stored, exclusively while a layer is
+    // replaced (TileService::swap_layer), so nothing of a replaced layer is kept after it.
+    std::shared_mutex swap_mutex;
+
+    // Runs `keep` (caching or storing what `served` made) unless `served` has been replaced.
+    template <typename Keep> void keep_if_current(const ServedLayer& served, Keep&& keep) {
+        std::shared_lock<std::shared_mutex> lock(swap_mutex);
+        const auto set = owner.layers();
+        for (const ServedLayer& l : set->served) {
+            if (&l == &served) {
+                keep();
+                return;
+            }
+        }
+    }
+
+    // Forgets what the memory cache and the flights hold of layer `name` (it was replaced).
+    void forget(const std::string& name) {
+        cache.erase_prefixed({"t/" + name + "/", "d/" + name + "/"});
+        const std::string prefix = "t/" + name + "/";
+        std::lock_guard<std::mutex> lock(flight_mutex);
+        for (auto it = flights.begin(); it != flights.end();) {
+            it = it->first.compare(0, prefix.size(), prefix) == 0 ? flights.erase(it)
+                                                                  : std::next(it);
+        }
+    }
 
     std::mutex flight_mutex; // guards flights, pending, waiting and every Job::waiters
     std::map<std::string, Flight> flights;
@@ -307,6 +352,7 @@ struct TileService::Impl {
     bool drop_unstarted(const std::string& key, const Flight& flight, Promise& promise);
     void leave(const std::string& key, const std::shared_ptr<Job>& job, bool gave_up);
     void generate(const TileRequest& r, Promise& promise, Job& job);
+    void keep(const TileRequest& r, const std::shared_ptr<const Blob>& made);
     std::shared_ptr<const Blob>
     make(const TileRequest& r, const Job& job, std::exception_ptr& error);
 
@@ -379,7 +425,7 @@ TileService::Impl::from_store(const TileRequest& r, Promise& promise, const Job&
     }
     ++metrics.store_hits;
     auto found = make_blob(std::move(*stored));
-    cache.put(r.key, found);
+    keep_if_current(*r.served, [&] { cache.put(r.key, found); });
     std::lock_guard<std::mutex> lock(flight_mutex);
     promise.set_value(found);
     erase_flight(r.key, job);
@@ -479,16 +525,8 @@ void TileService::Impl::generate(const TileRequest& r, Promise& promise, Job& jo
     metrics.generation_micros += static_cast<std::uint64_t>(
         std::chrono::duration_cast<std::chrono::microseconds>(Clock::now() - start).count());
     --metrics.in_flight_generations;
-    if (made && made->failure == 0 && r.in_store()) {
-        try {
-            r.served->store->put(r.store_key(), made->bytes);
-        } catch (const std::exception& e) {
-            ++metrics.store_write_failures;
-            log::warn(std::string("tile not stored: ") + e.what());
-        }
-    }
     if (made) {
-        cache.put(r.key, made); // even when nobody waits any more: the next request is a hit
+        keep_if_current(*r.served, [&] { keep(r, made); });
     }
     std::lock_guard<std::mutex> lock(flight_mutex);
     --pending;
@@ -498,6 +536,20 @@ void TileService::Impl::generate(const TileRequest& r, Promise& promise, Job& jo
         promise.set_value(made);
     }
     erase_flight(r.key, job);
+}
+
+// Stores (a payload) and caches what a generation made, even when nobody waits any more: the
+// next request is a hit.
+void TileService::Impl::keep(const TileRequest& r, const std::shared_ptr<const Blob>& made) {
+    if (made->failure == 0 && r.in_store()) {
+        try {
+            r.served->store->put(r.store_key(), made->bytes);
+        } catch (const std::exception& e) {
+            ++metrics.store_write_failures;
+            log::warn(std::string("tile not stored: ") + e.what());
+        }
+    }
+    cache.put(r.key, made);
 }
 
 // The request's tile, or a remembered failure (404: no data; 400: refused, deterministic for
@@ -531,7 +583,7 @@ TileService::TileService(std::vector<ServedLayer> layers,
                          const TileServiceOptions& options,
                          Metrics& metrics,
                          std::vector<UnavailableLayer> unavailable)
-    : layers_(std::move(layers)), unavailable_(std::move(unavailable)) {
+    : set_(std::make_shared<const LayerSet>(LayerSet{std::move(layers), std::move(unavailable)})) {
     TB_ASSERT(options.threads >= 1 && options.queue_limit >= 0 && options.max_waiting >= 0);
     TB_ASSERT(options.deadline.count() > 0 && options.start_wait.count() > 0);
     TileServiceOptions resolved = options;
@@ -540,9 +592,10 @@ TileService::TileService(std::vector<ServedLayer> layers,
         resolved.max_waiting = static_cast<int>(
             std::min<long long>(2LL * (options.threads + options.queue_limit), kMaxWaiting));
     }
-    impl_ = std::make_unique<Impl>(resolved, metrics);
-    TB_ASSERT(std::all_of(
-        layers_.begin(), layers_.end(), [](const ServedLayer& l) { return l.layer != nullptr; }));
+    impl_ = std::make_unique<Impl>(resolved, metrics, *this);
+    TB_ASSERT(std::all_of(set_->served.begin(), set_->served.end(), [](const ServedLayer& l) {
+        return l.layer != nullptr;
+    }));
 }
 
 TileService::~TileService() = default;
@@ -560,20 +613,29 @@ int TileService::max_waiting() const {
     return impl_->options.max_waiting;
 }
 
-const ServedLayer* TileService::find(const std::string& name) const {
-    for (const auto& l : layers_) {
+std::shared_ptr<const LayerSet> TileService::layers() const {
+    std::lock_guard<std::mutex> lock(set_mutex_);
+    return set_;
+}
+
+std::shared_ptr<const ServedLayer> TileService::find(const std::string& name) const {
+    const auto set = layers();
+    for (const auto& l : set->served) {
         if (l.layer->options().name == name) {
-            return &l;
+            return std::shared_ptr<const ServedLayer>(set, &l); // keeps the set alive
         }
     }
     return nullptr;
 }
 
-const ServedLayer& TileService::require(const std::string& name) const {
-    if (const ServedLayer* served = find(name)) {
-        return *served;
+std::shared_ptr<const ServedLayer> TileService::require(const std::string& name) const {
+    const auto set = layers();
+    for (const auto& l : set->served) {
+        if (l.layer->options().name == name) {
+            return std::shared_ptr<const ServedLayer>(set, &l);
+        }
     }
-    for (const auto& u : unavailable_) {
+    for (const auto& u : set->unavailable) {
         if (u.name == name) {
             throw Unavailable("layer '" + name + "' is unavailable: " + u.reason);
         }
@@ -677,7 +739,7 @@ std::shared_ptr<const Blob> TileService::tile(const std::string& layer_name,
                                               tiler::EpsChoice eps) {
     Impl& s = *impl_;
     const auto deadline = Clock::now() + s.options.deadline;
-    const ServedLayer* served = &require(layer_name);
+    const std::shared_ptr<const ServedLayer> served = require(layer_name);
     check_tile(*served, id, format, eps);
     const TileRequest r{
         served, layer_name, id, format, eps, tile_key(layer_name, id, format, eps.level), deadline};
@@ -746,7 +808,7 @@ TileService::cached_terrain(const std::string& layer,
 
 std::shared_ptr<const Blob> TileService::document(const std::string& layer_name,
                                                   const std::string& path) {
-    const ServedLayer* served = &require(layer_name);
+    const std::shared_ptr<const ServedLayer> served = require(layer_name);
     if (path == "layer.json" &&
         std::find(served->formats.begin(), served->formats.end(), tiler::Format::Terrain) ==
             served->formats.end()) {
@@ -770,10 +832,59 @@ std::shared_ptr<const Blob> TileService::document(const std::string& layer_name,
         } else {
             blob = make_failure(404, "layer '" + layer_name + "' has no document '" + path + "'");
         }
-        s.cache.put(key, blob);
+        s.keep_if_current(*served, [&] { s.cache.put(key, blob); });
     }
     throw_if_failure(*blob);
     return blob;
+}
+
+void TileService::replace_layer(ServedLayer served,
+                                const std::function<void(ServedLayer&)>& prepare) {
+    TB_ASSERT(served.layer != nullptr);
+    const std::string name = served.layer->options().name;
+    std::unique_lock<std::shared_mutex> lock(impl_->swap_mutex);
+    if (prepare) {
+        prepare(served);
+    }
+    swap_layer(name, std::move(served), std::nullopt);
+}
+
+void TileService::make_unavailable(const std::string& name, const std::string& reason) {
+    std::unique_lock<std::shared_mutex> lock(impl_->swap_mutex);
+    swap_layer(name, std::nullopt, UnavailableLayer{name, reason});
+}
+
+// With swap_mutex held: a new set with `name` as `served` or `unavailable` (in its old place
+// when it was served), then the old layer's cache entries and flights forgotten.
+void TileService::swap_layer(const std::string& name,
+                             std::optional<ServedLayer> served,
+                             std::optional<UnavailableLayer> unavailable) {
+    auto next = std::make_shared<LayerSet>(*layers());
+    auto& u = next->unavailable;
+    u.erase(std::remove_if(
+                u.begin(), u.end(), [&](const UnavailableLayer& l) { return l.name == name; }),
+            u.end());
+    auto& s = next->served;
+    const auto at = std::find_if(
+        s.begin(), s.end(), [&](const ServedLayer& l) { return l.layer->options().name == name; });
+    if (served && at != s.end()) {
+        *at = std::move(*served);
+    } else {
+        if (at != s.end()) {
+            s.erase(at);
+        }
+        if (served) {
+            s.push_back(std::move(*served));
+        }
+    }
+    if (unavailable) {
+        u.push_back(std::move(*unavailable));
+    }
+    {
+        std::lock_guard<std::mutex> lock(set_mutex_);
+        set_ = std::move(next);
+    }
+    impl_->forget(name);
 }
 
 } // namespace tb::server

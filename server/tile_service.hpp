@@ -19,6 +19,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -40,6 +41,13 @@ struct ServedLayer {
 struct UnavailableLayer {
     std::string name;
     std::string reason; // the error that stopped it, naming the file
+};
+
+// What a TileService serves at one moment: replaced whole when a layer is reloaded, so that a
+// request sees one set from start to end.
+struct LayerSet {
+    std::vector<ServedLayer> served;
+    std::vector<UnavailableLayer> unavailable;
 };
 
 // A request for an UnavailableLayer: HTTP 503 with the message.
@@ -107,12 +115,22 @@ public:
     TileService(const TileService&) = delete;
     TileService& operator=(const TileService&) = delete;
 
-    const std::vector<ServedLayer>& layers() const { return layers_; }
-    const ServedLayer* find(const std::string& name) const; // nullptr when unknown
-    const std::vector<UnavailableLayer>& unavailable() const { return unavailable_; }
+    // The layers served now (bind the result before iterating: it keeps them alive).
+    std::shared_ptr<const LayerSet> layers() const;
+    std::shared_ptr<const ServedLayer> find(const std::string& name) const; // null: unknown
     // The layer named `name`: throws Unavailable for an unavailable one (with its reason),
     // NotFound for a name no layer has.
-    const ServedLayer& require(const std::string& name) const;
+    std::shared_ptr<const ServedLayer> require(const std::string& name) const;
+
+    // Serves `served` from now on in place of the layer of its name (served or unavailable;
+    // added if neither). First, with no tile cached or stored meanwhile, runs `prepare` (which
+    // readies the layer's store: tiler::prepare_store_for_serving). The layer's cached tiles
+    // and documents and its generations in flight are forgotten, and a generation of the old
+    // layer that finishes later neither caches nor stores its tile: no answer after the swap
+    // comes from the old layer, and none mixes the two. Thread-safe.
+    void replace_layer(ServedLayer served, const std::function<void(ServedLayer&)>& prepare = {});
+    // The same, the layer answering 503 with `reason` from now on.
+    void make_unavailable(const std::string& name, const std::string& reason);
     // Requests that may wait for generations at once (TileServiceOptions::max_waiting, resolved).
     int max_waiting() const;
 
@@ -163,8 +181,11 @@ public:
 
 private:
     struct Impl;
-    std::vector<ServedLayer> layers_;
-    std::vector<UnavailableLayer> unavailable_;
+    void swap_layer(const std::string& name,
+                    std::optional<ServedLayer> served,
+                    std::optional<UnavailableLayer> unavailable);
+    mutable std::mutex set_mutex_; // guards set_ (the pointer; the set itself is immutable)
+    std::shared_ptr<const LayerSet> set_;
     std::unique_ptr<Impl> impl_;
 };
 

@@ -1,0 +1,133 @@
+// `terrabound serve` follows its sources without a restart: a source replaced under it (on
+// SIGHUP, or found by the periodic check) is served anew, tile for tile the bytes a fresh layer
+// of the new file makes, with new ETags and no old tile left in its store; a replacement that
+// cannot be read makes the layer answer 503 with the reason until it is fixed.
+#include "serve_process.hpp"
+#include "server_fixture.hpp"
+#include "tiler/stores/store.hpp"
+
+#include <doctest/doctest.h>
+
+#include <signal.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <thread>
+
+namespace {
+
+using namespace tb;
+
+constexpr const char* kTile = "/hills/8/272/210.glb";
+
+// The response to GET `path` once `done` accepts it, polled for up to 30 s; the last one if
+// none was accepted (so the test's checks say what it was).
+httplib::Result
+poll(int port, const std::string& path, const std::function<bool(const httplib::Result&)>& done) {
+    httplib::Client c("127.0.0.1", port);
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+    for (;;) {
+        auto res = c.Get(path.c_str());
+        if (done(res) || std::chrono::steady_clock::now() > until) {
+            return res;
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+}
+
+// Writes the hills DEM of n x n samples to dir/name, then renames it over dir/hills.asc.
+void replace_source(const test::TempDir& dir, int n) {
+    test::write_dem(dir / "next.asc", n);
+    std::filesystem::rename(dir / "next.asc", dir / "hills.asc");
+}
+
+std::string config_text(int watch_interval_s) {
+    return R"({"server": {"threads": 1, "watch_interval_s": )" + std::to_string(watch_interval_s) +
+           R"(}, "layers": [{"name": "hills", "sources": ["hills.asc"], "tile_size": 64,
+           "min_zoom": 5, "max_zoom": 8, "eps_levels": [5, 20], "store": "tiles"}]})";
+}
+
+// The glb a layer freshly opened on dir/hills.asc makes for kTile.
+std::string fresh_tile(const test::TempDir& dir) {
+    const auto layer = tiler::Layer::open(test::test_layer_options(dir / "hills.asc", "hills"));
+    return layer->make_tile(tiler::TileId{8, 272, 210}, tiler::Format::Glb);
+}
+
+} // namespace
+
+TEST_CASE("on SIGHUP a replaced source is served anew: the new layer's bytes, a new ETag, and "
+          "no old tile left in the store") {
+    test::TempDir dir;
+    test::write_dem(dir / "hills.asc", 257);
+    test::write_file(dir / "serve.json", config_text(0));
+    test::Child child;
+    const int port = test::start_server(child, {dir / "serve.json"}, dir / "serve.log");
+    httplib::Client c("127.0.0.1", port);
+    const auto before = c.Get(kTile);
+    REQUIRE(before);
+    REQUIRE(before->status == 200);
+    CHECK(before->body == fresh_tile(dir));
+    const std::string old_etag = before->get_header_value("ETag");
+
+    replace_source(dir, 193);
+    const std::string expected = fresh_tile(dir);
+    REQUIRE(expected != before->body);
+    REQUIRE(kill(child.pid, SIGHUP) == 0);
+    const auto after = poll(port, kTile, [&](const httplib::Result& r) {
+        return r && r->status == 200 && r->get_header_value("ETag") != old_etag;
+    });
+    REQUIRE(after);
+    INFO(test::read_file(dir / "serve.log"));
+    CHECK(after->status == 200);
+    CHECK(after->body == expected);
+    CHECK(after->get_header_value("ETag") != old_etag);
+    CHECK(
+        test::read_file(dir / "serve.log").find("reload: layer hills now serves its new sources") !=
+        std::string::npos);
+    // The store holds the new tile (written as it was made), never the old one.
+    auto store = tiler::TileStore::open(dir / "tiles");
+    const auto stored = store->get(tiler::TileKey{"hills", {8, 272, 210}, tiler::Format::Glb, -1});
+    REQUIRE(stored);
+    CHECK(*stored == expected);
+    kill(child.pid, SIGTERM);
+    CHECK(child.wait_exit() == 0);
+}
+
+TEST_CASE("the periodic check finds a replaced source by itself; an unreadable replacement "
+          "answers 503 with the reason until a readable one replaces it") {
+    test::TempDir dir;
+    test::write_dem(dir / "hills.asc", 257);
+    test::write_file(dir / "serve.json", config_text(1));
+    test::Child child;
+    const int port = test::start_server(child, {dir / "serve.json"}, dir / "serve.log");
+    httplib::Client c("127.0.0.1", port);
+    const auto before = c.Get(kTile);
+    REQUIRE(before);
+    REQUIRE(before->status == 200);
+
+    test::write_file(dir / "next.asc", "ncols 3\nnrows 3\nthis is not a grid\n");
+    std::filesystem::rename(dir / "next.asc", dir / "hills.asc");
+    const auto broken =
+        poll(port, kTile, [](const httplib::Result& r) { return r && r->status == 503; });
+    REQUIRE(broken);
+    INFO(test::read_file(dir / "serve.log"));
+    CHECK(broken->status == 503);
+    CHECK(broken->body.find("unavailable") != std::string::npos);
+    CHECK(
+        test::read_file(dir / "serve.log").find("it answers 503 until its sources change again") !=
+        std::string::npos);
+    const auto health = c.Get("/health");
+    REQUIRE(health);
+    CHECK(health->status == 200);
+
+    replace_source(dir, 129);
+    const std::string expected = fresh_tile(dir);
+    const auto fixed =
+        poll(port, kTile, [](const httplib::Result& r) { return r && r->status == 200; });
+    REQUIRE(fixed);
+    CHECK(fixed->status == 200);
+    CHECK(fixed->body == expected);
+    kill(child.pid, SIGTERM);
+    CHECK(child.wait_exit() == 0);
+}
