@@ -35,7 +35,8 @@ PixelSpan pixels_in(const LonLatBox& bounds, int z, int p) {
     double west = 0, south = 0, east = 0, north = 0;
     lonlat_to_native(Scheme::Mercator, {bounds.west, bounds.south}, west, south);
     lonlat_to_native(Scheme::Mercator, {bounds.east, bounds.north}, east, north);
-    const double x0 = lattice_x(Scheme::Mercator, z, p, 0), y0 = lattice_y(Scheme::Mercator, z, p, 0);
+    const double x0 = lattice_x(Scheme::Mercator, z, p, 0),
+                 y0 = lattice_y(Scheme::Mercator, z, p, 0);
     const double pw = lattice_x(Scheme::Mercator, z, p, 1) - x0;
     const auto span = [](double lo, double hi) {
         auto first = static_cast<std::int64_t>(std::ceil(lo - 0.5));
@@ -63,7 +64,9 @@ void extend_edges(const Layer& layer,
                   std::vector<double>& heights,
                   std::vector<std::uint8_t>& valid) {
     const PixelSpan in = pixels_in(plan.bounds, z, plan.tile_size);
-    const auto clamp_column = [&](std::int64_t c) { return std::clamp(c, in.first_column, in.last_column); };
+    const auto clamp_column = [&](std::int64_t c) {
+        return std::clamp(c, in.first_column, in.last_column);
+    };
     const auto clamp_row = [&](std::int64_t r) { return std::clamp(r, in.first_row, in.last_row); };
     const std::int64_t c_lo = clamp_column(column0), c_hi = clamp_column(column0 + w - 1);
     const std::int64_t r_lo = clamp_row(row0), r_hi = clamp_row(row0 + w - 1);

@@ -913,10 +913,8 @@ TEST_CASE("a directory build writes the host files, whose rules cover every file
           "the DEM TileJSON with relative or --base-url tile URLs") {
     BuildDir dir;
     const auto dem = write_dem(dir / "dem.tif");
-    const Run a = run(args(dem,
-                           dir / "out",
-                           {"--formats", "glb,drc,terrarium,mapbox,terrain,terrain3d"}),
-                      dir);
+    const Run a = run(
+        args(dem, dir / "out", {"--formats", "glb,drc,terrarium,mapbox,terrain,terrain3d"}), dir);
     INFO(a.err);
     REQUIRE(a.code == 0);
     for (const HostFile& f : host_files()) {
@@ -964,8 +962,9 @@ TEST_CASE("a directory build writes the host files, whose rules cover every file
           std::string::npos);
     const Run db = run(args(dem, dir / "out.sqlite", {"--formats", "mapbox"}), dir);
     REQUIRE(db.code == 0);
-    CHECK(TileStore::open(dir / "out.sqlite")->get_document("terrain", "dem/mapbox/tilejson.json") ==
-          dem_tilejson(*layer, Format::Mapbox, "{z}/{x}/{y}.png"));
+    CHECK(
+        TileStore::open(dir / "out.sqlite")->get_document("terrain", "dem/mapbox/tilejson.json") ==
+        dem_tilejson(*layer, Format::Mapbox, "{z}/{x}/{y}.png"));
     CHECK_FALSE(fs::exists(dir.path / "_headers"));
     const Run bad = run(args(dem, dir / "bad", {"--base-url", "example.com"}), dir);
     CHECK(bad.code != 0);

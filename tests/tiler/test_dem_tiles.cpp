@@ -338,23 +338,30 @@ TEST_CASE("DEM tile pixels beyond the DEM's footprint carry the height of the ne
     }
     // The footprint (11..11.5 E, 57..57.5 N) in pixel centres, from the mercator formulas.
     const double n = static_cast<double>(p) * std::exp2(z);
-    const auto lon_of = [&](std::int64_t c) { return (static_cast<double>(c) + 0.5) / n * 360 - 180; };
+    const auto lon_of = [&](std::int64_t c) {
+        return (static_cast<double>(c) + 0.5) / n * 360 - 180;
+    };
     const auto lat_of = [&](std::int64_t row) {
         const double m = kPi * (1 - 2 * (static_cast<double>(row) + 0.5) / n);
         return std::atan(std::sinh(m)) * 180 / kPi;
     };
     std::int64_t first_c = c0, last_c = c0 + cols - 1, first_r = r0, last_r = r0 + rows - 1;
-    while (lon_of(first_c) < 11.0) ++first_c;
-    while (lon_of(last_c) > 11.5) --last_c;
-    while (lat_of(first_r) > 57.5) ++first_r;
-    while (lat_of(last_r) < 57.0) --last_r;
+    while (lon_of(first_c) < 11.0)
+        ++first_c;
+    while (lon_of(last_c) > 11.5)
+        --last_c;
+    while (lat_of(first_r) > 57.5)
+        ++first_r;
+    while (lat_of(last_r) < 57.0)
+        --last_r;
     REQUIRE(first_c > c0);
     REQUIRE(first_r > r0);
     std::size_t outside = 0, same = 0;
     double lo = INFINITY;
     for (std::int64_t row = r0; row < r0 + rows; ++row) {
         for (std::int64_t c = c0; c < c0 + cols; ++c) {
-            const std::int64_t cc = std::clamp(c, first_c, last_c), rr = std::clamp(row, first_r, last_r);
+            const std::int64_t cc = std::clamp(c, first_c, last_c),
+                               rr = std::clamp(row, first_r, last_r);
             if (cc == c && rr == row) {
                 continue;
             }
@@ -365,7 +372,8 @@ TEST_CASE("DEM tile pixels beyond the DEM's footprint carry the height of the ne
             lo = std::min(lo, here);
         }
     }
-    MESSAGE(outside << " pixels beyond the footprint, " << same << " equal to their nearest inside");
+    MESSAGE(outside << " pixels beyond the footprint, " << same
+                    << " equal to their nearest inside");
     CHECK(outside > 10000u);
     CHECK(same == outside);
     CHECK(lo >= 22.7); // the fixture's lowest height: nothing drops to sea level

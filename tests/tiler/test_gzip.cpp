@@ -56,8 +56,8 @@ TEST_CASE("gzip round-trips bytes, and refuses what is not one whole gzip member
 
     CHECK_FALSE(gzip_decompress(packed, bytes.size() - 1)); // inflates past the limit
     CHECK_FALSE(gzip_decompress(packed.substr(0, packed.size() - 1), bytes.size())); // cut
-    CHECK_FALSE(gzip_decompress(packed + "x", bytes.size()));                       // trailer
-    CHECK_FALSE(gzip_decompress(bytes, bytes.size()));                              // raw
+    CHECK_FALSE(gzip_decompress(packed + "x", bytes.size()));                        // trailer
+    CHECK_FALSE(gzip_decompress(bytes, bytes.size()));                               // raw
     std::string flipped = packed;
     flipped[packed.size() - 6] = static_cast<char>(flipped[packed.size() - 6] ^ 0x10); // CRC
     CHECK_FALSE(gzip_decompress(flipped, bytes.size()));

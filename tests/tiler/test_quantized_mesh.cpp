@@ -235,7 +235,8 @@ TEST_CASE("terrain extension lists parse by their layer.json names, and layer.js
     CHECK(tiler::terrain_extensions_json(0) == "[]");
     CHECK(tiler::terrain_extensions_json(kWaterMask | kMetadata) == R"(["watermask","metadata"])");
 
-    tiler::TerrainSpec spec{"dem", 2, 4, LonLatBox{7, 46, 7.5, 46.5}, [](int z) { return 1.0 * z; }};
+    tiler::TerrainSpec spec{
+        "dem", 2, 4, LonLatBox{7, 46, 7.5, 46.5}, [](int z) { return 1.0 * z; }};
     const std::string full = tiler::terrain_layer_json(spec);
     CHECK(full.find(R"("extensions":["octvertexnormals","watermask","metadata"],)"
                     R"("metadataAvailability":10,)") != std::string::npos);
@@ -247,7 +248,8 @@ TEST_CASE("terrain extension lists parse by their layer.json names, and layer.js
     CHECK(bare.find(R"("extensions":["octvertexnormals"],"available":[)") != std::string::npos);
     CHECK(bare.find("metadataAvailability") == std::string::npos);
     // Apart from the list, the documents are the same.
-    CHECK(bare.size() + std::string(R"(,"watermask","metadata","metadataAvailability":10)").size() ==
+    CHECK(bare.size() +
+              std::string(R"(,"watermask","metadata","metadataAvailability":10)").size() ==
           full.size());
     CHECK_THROWS_AS(tiler::layer_json_with_extensions("{}", kMetadata), InputError);
 }

@@ -959,19 +959,18 @@ TileRange terrain_available(const TerrainSpec& spec, int z) {
 }
 
 std::string terrain_layer_json(const TerrainSpec& spec) {
-    std::string out = "{\"tilejson\":\"2.1.0\",\"name\":\"" + spec.name +
-                      "\",\"description\":\"Terrabound quantized-mesh terrain: meshed from the "
-                      "DEM at zooms " +
-                      std::to_string(spec.min_zoom) + ".." + std::to_string(spec.max_zoom) +
-                      "; coarser tiles, and tiles beside the data, are flat filler at sea "
-                      "level\",\"version\":\"1.0.0\",\"format\":\"quantized-mesh-1.0\","
-                      "\"scheme\":\"tms\",\"projection\":\"EPSG:4326\",\"tiles\":[\"{z}/{x}/"
-                      "{y}.terrain\"],\"minzoom\":0,\"maxzoom\":" +
-                      std::to_string(spec.max_zoom) +
-                      ",\"bounds\":[-180,-90,180,90],\"extensions\":" +
-                      terrain_extensions_json(kAllQuantizedMeshExtensions) +
-                      ",\"metadataAvailability\":" +
-                      std::to_string(kMetadataLevels) + ",\"available\":[";
+    std::string out =
+        "{\"tilejson\":\"2.1.0\",\"name\":\"" + spec.name +
+        "\",\"description\":\"Terrabound quantized-mesh terrain: meshed from the "
+        "DEM at zooms " +
+        std::to_string(spec.min_zoom) + ".." + std::to_string(spec.max_zoom) +
+        "; coarser tiles, and tiles beside the data, are flat filler at sea "
+        "level\",\"version\":\"1.0.0\",\"format\":\"quantized-mesh-1.0\","
+        "\"scheme\":\"tms\",\"projection\":\"EPSG:4326\",\"tiles\":[\"{z}/{x}/"
+        "{y}.terrain\"],\"minzoom\":0,\"maxzoom\":" +
+        std::to_string(spec.max_zoom) + ",\"bounds\":[-180,-90,180,90],\"extensions\":" +
+        terrain_extensions_json(kAllQuantizedMeshExtensions) +
+        ",\"metadataAvailability\":" + std::to_string(kMetadataLevels) + ",\"available\":[";
     for (int z = 0; z <= spec.max_zoom; ++z) {
         const TileRange r = terrain_available(spec, z);
         out += std::string(z ? "," : "") + "[" + (r.empty() ? "" : range_json(r)) + "]";
@@ -990,7 +989,8 @@ std::string terrain_layer_json(const TerrainSpec& spec) {
 }
 
 std::string layer_json_with_extensions(std::string_view layer_json, unsigned mask) {
-    const std::string list = "\"extensions\":" + terrain_extensions_json(kAllQuantizedMeshExtensions);
+    const std::string list =
+        "\"extensions\":" + terrain_extensions_json(kAllQuantizedMeshExtensions);
     const std::size_t at = layer_json.find(list);
     if (at == std::string_view::npos) {
         throw InputError("layer.json: no extension list to restrict");
@@ -998,8 +998,7 @@ std::string layer_json_with_extensions(std::string_view layer_json, unsigned mas
     std::string out(layer_json.substr(0, at));
     out += "\"extensions\":" + terrain_extensions_json(mask);
     std::string_view rest = layer_json.substr(at + list.size());
-    const std::string availability =
-        ",\"metadataAvailability\":" + std::to_string(kMetadataLevels);
+    const std::string availability = ",\"metadataAvailability\":" + std::to_string(kMetadataLevels);
     if ((mask & kMetadata) == 0 && rest.substr(0, availability.size()) == availability) {
         rest.remove_prefix(availability.size());
     }

@@ -54,7 +54,8 @@ std::string headers_file() {
     std::string out =
         "# Terrabound: the headers of a static copy of this build (written by terrabound build),\n"
         "# for Netlify and Cloudflare Pages: publish this directory as the site's root.\n"
-        "# .terrain files are stored gzip-compressed: they must go out with Content-Encoding: gzip.\n"
+        "# .terrain files are stored gzip-compressed: they must go out with Content-Encoding: "
+        "gzip.\n"
         "/*\n  Access-Control-Allow-Origin: *\n";
     for (const HostRule& r : host_rules()) {
         out += "/*." + r.extension + "\n  Content-Type: " + r.media_type + "\n";
@@ -96,9 +97,9 @@ std::string dem_tilejson(const Layer& layer, Format encoding, const std::string&
     return "{\"tilejson\":\"3.0.0\",\"name\":" + json_string(layer.options().name) +
            ",\"scheme\":\"xyz\",\"tiles\":[" + json_string(tiles_url) +
            "],\"minzoom\":" + std::to_string(plan.min_zoom) +
-           ",\"maxzoom\":" + std::to_string(plan.max_zoom) + ",\"bounds\":[" +
-           json_number(b.west) + "," + json_number(b.south) + "," + json_number(b.east) + "," +
-           json_number(b.north) + "],\"center\":[" + json_number(0.5 * (b.west + b.east)) + "," +
+           ",\"maxzoom\":" + std::to_string(plan.max_zoom) + ",\"bounds\":[" + json_number(b.west) +
+           "," + json_number(b.south) + "," + json_number(b.east) + "," + json_number(b.north) +
+           "],\"center\":[" + json_number(0.5 * (b.west + b.east)) + "," +
            json_number(0.5 * (b.south + b.north)) + "," + std::to_string(plan.max_zoom) +
            "],\"encoding\":\"" + format_name(encoding) +
            "\",\"tileSize\":" + std::to_string(plan.tile_size) + "}\n";

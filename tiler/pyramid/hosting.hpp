@@ -14,10 +14,10 @@ namespace tb::tiler {
 
 // How a host sends the files of one extension.
 struct HostRule {
-    std::string extension;       // "terrain", "glb", ... (no dot)
-    std::string media_type;      // Content-Type
-    std::string encoding;        // Content-Encoding, empty for none
-    std::string cache_control;   // Cache-Control
+    std::string extension;     // "terrain", "glb", ... (no dot)
+    std::string media_type;    // Content-Type
+    std::string encoding;      // Content-Encoding, empty for none
+    std::string cache_control; // Cache-Control
 };
 
 // One rule per kind of file a directory store holds (tiles, subtrees, documents).
