@@ -54,69 +54,76 @@ std::string fresh_tile(const test::TempDir& dir) {
     return layer->make_tile(tiler::TileId{8, 272, 210}, tiler::Format::Glb);
 }
 
+// `terrabound serve` on dir/hills.asc (257 x 257 samples) with a directory store, checking its
+// sources every `watch_interval_s` (0: on SIGHUP only), and the tile it first answers.
+struct Serving {
+    test::TempDir dir;
+    test::Child child;
+    int port = 0;
+    std::string first; // kTile's body
+    std::string etag;  // and ETag
+
+    explicit Serving(int watch_interval_s) {
+        test::write_dem(dir / "hills.asc", 257);
+        test::write_file(dir / "serve.json", config_text(watch_interval_s));
+        port = test::start_server(child, {dir / "serve.json"}, dir / "serve.log");
+        httplib::Client c("127.0.0.1", port);
+        const auto res = c.Get(kTile);
+        REQUIRE(res);
+        REQUIRE(res->status == 200);
+        first = res->body;
+        etag = res->get_header_value("ETag");
+    }
+    std::string log() const { return test::read_file(dir / "serve.log"); }
+    void stop() {
+        kill(child.pid, SIGTERM);
+        CHECK(child.wait_exit() == 0);
+    }
+};
+
 } // namespace
 
 TEST_CASE("on SIGHUP a replaced source is served anew: the new layer's bytes, a new ETag, and "
           "no old tile left in the store") {
-    test::TempDir dir;
-    test::write_dem(dir / "hills.asc", 257);
-    test::write_file(dir / "serve.json", config_text(0));
-    test::Child child;
-    const int port = test::start_server(child, {dir / "serve.json"}, dir / "serve.log");
-    httplib::Client c("127.0.0.1", port);
-    const auto before = c.Get(kTile);
-    REQUIRE(before);
-    REQUIRE(before->status == 200);
-    CHECK(before->body == fresh_tile(dir));
-    const std::string old_etag = before->get_header_value("ETag");
-
-    replace_source(dir, 193);
-    const std::string expected = fresh_tile(dir);
-    REQUIRE(expected != before->body);
-    REQUIRE(kill(child.pid, SIGHUP) == 0);
-    const auto after = poll(port, kTile, [&](const httplib::Result& r) {
-        return r && r->status == 200 && r->get_header_value("ETag") != old_etag;
+    Serving s(0);
+    CHECK(s.first == fresh_tile(s.dir));
+    replace_source(s.dir, 193);
+    const std::string expected = fresh_tile(s.dir);
+    REQUIRE(expected != s.first);
+    REQUIRE(kill(s.child.pid, SIGHUP) == 0);
+    const auto after = poll(s.port, kTile, [&](const httplib::Result& r) {
+        return r && r->status == 200 && r->get_header_value("ETag") != s.etag;
     });
     REQUIRE(after);
-    INFO(test::read_file(dir / "serve.log"));
+    INFO(s.log());
     CHECK(after->status == 200);
     CHECK(after->body == expected);
-    CHECK(after->get_header_value("ETag") != old_etag);
-    CHECK(
-        test::read_file(dir / "serve.log").find("reload: layer hills now serves its new sources") !=
-        std::string::npos);
+    CHECK(after->get_header_value("ETag") != s.etag);
+    CHECK(s.log().find("reload: layer hills now serves its new sources") != std::string::npos);
     // The store holds the new tile (written as it was made), never the old one.
-    auto store = tiler::TileStore::open(dir / "tiles");
+    auto store = tiler::TileStore::open(s.dir / "tiles");
     const auto stored = store->get(tiler::TileKey{"hills", {8, 272, 210}, tiler::Format::Glb, -1});
     REQUIRE(stored);
     CHECK(*stored == expected);
-    kill(child.pid, SIGTERM);
-    CHECK(child.wait_exit() == 0);
+    s.stop();
 }
 
 TEST_CASE("the periodic check finds a replaced source by itself; an unreadable replacement "
           "answers 503 with the reason until a readable one replaces it") {
-    test::TempDir dir;
-    test::write_dem(dir / "hills.asc", 257);
-    test::write_file(dir / "serve.json", config_text(1));
-    test::Child child;
-    const int port = test::start_server(child, {dir / "serve.json"}, dir / "serve.log");
+    Serving s(1);
+    const test::TempDir& dir = s.dir;
+    const int port = s.port;
     httplib::Client c("127.0.0.1", port);
-    const auto before = c.Get(kTile);
-    REQUIRE(before);
-    REQUIRE(before->status == 200);
 
     test::write_file(dir / "next.asc", "ncols 3\nnrows 3\nthis is not a grid\n");
     std::filesystem::rename(dir / "next.asc", dir / "hills.asc");
     const auto broken =
         poll(port, kTile, [](const httplib::Result& r) { return r && r->status == 503; });
     REQUIRE(broken);
-    INFO(test::read_file(dir / "serve.log"));
+    INFO(s.log());
     CHECK(broken->status == 503);
     CHECK(broken->body.find("unavailable") != std::string::npos);
-    CHECK(
-        test::read_file(dir / "serve.log").find("it answers 503 until its sources change again") !=
-        std::string::npos);
+    CHECK(s.log().find("it answers 503 until its sources change again") != std::string::npos);
     const auto health = c.Get("/health");
     REQUIRE(health);
     CHECK(health->status == 200);
@@ -128,6 +135,5 @@ TEST_CASE("the periodic check finds a replaced source by itself; an unreadable r
     REQUIRE(fixed);
     CHECK(fixed->status == 200);
     CHECK(fixed->body == expected);
-    kill(child.pid, SIGTERM);
-    CHECK(child.wait_exit() == 0);
+    s.stop();
 }

@@ -17,6 +17,8 @@
 
 namespace fs = std::filesystem;
 using namespace tb::tiler;
+using tb_test::slurp;
+using tb_test::spill;
 
 namespace {
 
@@ -28,18 +30,6 @@ std::string tile_like_bytes(std::size_t n, unsigned seed) {
         s[i] = static_cast<char>((i / 64) + (rng() & 0x0f));
     }
     return s;
-}
-
-std::string slurp(const fs::path& p) {
-    std::ifstream in(p, std::ios::binary);
-    std::ostringstream s;
-    s << in.rdbuf();
-    return s.str();
-}
-
-void spill(const fs::path& p, const std::string& bytes) {
-    std::ofstream out(p, std::ios::binary | std::ios::trunc);
-    out << bytes;
 }
 
 const TileKey kTerrain{"terrain", TileId{3, 9, 2}, Format::Terrain, -1};

@@ -12,7 +12,9 @@
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <optional>
+#include <sstream>
 #include <string>
 #include <unistd.h>
 #include <vector>
@@ -20,6 +22,20 @@
 namespace tb_test {
 
 namespace fs = std::filesystem;
+
+// The whole file at `p` (empty when it cannot be read).
+inline std::string slurp(const fs::path& p) {
+    std::ifstream in(p, std::ios::binary);
+    std::ostringstream s;
+    s << in.rdbuf();
+    return s.str();
+}
+
+// Replaces the file at `p` with `bytes`, as damage behind a store's back would.
+inline void spill(const fs::path& p, const std::string& bytes) {
+    std::ofstream out(p, std::ios::binary | std::ios::trunc);
+    out << bytes;
+}
 
 // A fresh directory under the system temp dir, removed at scope exit.
 struct ScratchDir {

@@ -21,6 +21,8 @@
 
 namespace fs = std::filesystem;
 using namespace tb::tiler;
+using tb_test::slurp;
+using tb_test::spill;
 
 namespace {
 
@@ -33,18 +35,6 @@ std::string random_bytes(std::size_t n, unsigned seed) {
         c = static_cast<char>(rng() & 0xff);
     }
     return s;
-}
-
-std::string slurp(const fs::path& p) {
-    std::ifstream in(p, std::ios::binary);
-    std::ostringstream s;
-    s << in.rdbuf();
-    return s.str();
-}
-
-void spill(const fs::path& p, const std::string& bytes) {
-    std::ofstream out(p, std::ios::binary | std::ios::trunc);
-    out << bytes;
 }
 
 // The four kinds of damage, each a function of the good bytes.

@@ -245,6 +245,22 @@ bool same_blocks(const DemSummary& a, const DemSummary& b) {
     return true;
 }
 
+// A rough DEM's summary and its key, as save_summary and load_summary take them.
+struct MadeSummary {
+    std::string dem;
+    DemSummary summary;
+    std::string key;
+    explicit MadeSummary(const tb_test::ScratchDir& dir) : dem(rough_dem(dir, "rough.tif", 0)) {
+        const auto source = DemSource::open({dem});
+        const auto grid = source->pixel_grid(Scheme::Geodetic);
+        REQUIRE(grid);
+        summary = DemSummary::build(*source, *grid, VerticalDatum::Ellipsoid);
+        const auto made_key = summary_key({dem}, std::nullopt, VerticalDatum::Ellipsoid, *grid);
+        REQUIRE(made_key);
+        key = *made_key;
+    }
+};
+
 } // namespace
 
 TEST_CASE("a summary saved to disk reads back block for block, and a damaged, cut or foreign "
@@ -293,13 +309,7 @@ TEST_CASE("saving a summary removes the temporary files a killed process left an
           "more, and no other file") {
     namespace fs = std::filesystem;
     tb_test::ScratchDir dir;
-    const std::string dem = rough_dem(dir, "rough.tif", 0);
-    const auto source = DemSource::open({dem});
-    const auto grid = source->pixel_grid(Scheme::Geodetic);
-    REQUIRE(grid);
-    const DemSummary made = DemSummary::build(*source, *grid, VerticalDatum::Ellipsoid);
-    const auto key = summary_key({dem}, std::nullopt, VerticalDatum::Ellipsoid, *grid);
-    REQUIRE(key);
+    const MadeSummary m(dir);
     const fs::path cache = dir.file("cache");
     fs::create_directories(cache);
     const auto touch = [&](const std::string& name, std::chrono::minutes age) {
@@ -309,11 +319,11 @@ TEST_CASE("saving a summary removes the temporary files a killed process left an
     touch("old-0123456789abcdef.tbsum.tmp-4242-1", std::chrono::minutes(61));
     touch("new-0123456789abcdef.tbsum.tmp-4243-1", std::chrono::minutes(5));
     touch("notes.tmp-1", std::chrono::minutes(600));
-    save_summary(summary_path(cache, dem, *key), *key, made);
+    save_summary(summary_path(cache, m.dem, m.key), m.key, m.summary);
     CHECK_FALSE(fs::exists(cache / "old-0123456789abcdef.tbsum.tmp-4242-1"));
     CHECK(fs::exists(cache / "new-0123456789abcdef.tbsum.tmp-4243-1"));
     CHECK(fs::exists(cache / "notes.tmp-1"));
-    CHECK(load_summary(summary_path(cache, dem, *key), *key));
+    CHECK(load_summary(summary_path(cache, m.dem, m.key), m.key));
 }
 
 TEST_CASE("a layer keeps its summary in summary_dir, reads it back, and makes a new one when the "
