@@ -38,7 +38,7 @@ for input in N48W125.hgt.zip N44W072.hgt; do
         rm -rf "$out"
         # shellcheck disable=SC2086
         /usr/bin/time -v -o "$SCRATCH/time.txt" "$TB" build "$dem" -o "$out" --threads "$t" \
-            --json $EXTRA >"$SCRATCH/summary.json" 2>"$SCRATCH/log.txt" || {
+            --layer terrain --formats glb --json $EXTRA >"$SCRATCH/summary.json" 2>"$SCRATCH/log.txt" || {
             echo "build_bench.sh: build of $input failed:" >&2
             tail -5 "$SCRATCH/log.txt" >&2
             exit 1

@@ -89,7 +89,7 @@ build_tb() {
     rm -rf "$TB_OUT"
     before=$(load1)
     run "$W/tb-build.log" "$W/tb-build.time" "$TB" build "$DEM" -o "$TB_OUT" \
-        --formats terrain --threads "$THREADS" ${ZMAX:+--max-zoom "$ZMAX"} || rc=$?
+        --layer terrain --formats terrain --threads "$THREADS" ${ZMAX:+--max-zoom "$ZMAX"} || rc=$?
     [[ -z $ZMAX && -s $TB_OUT/terrain/layer.json ]] && ZMAX=$(maxzoom "$TB_OUT/terrain/layer.json")
     report terrabound "$W/tb-build.time" "$(count "$TB_OUT")" "$before" "$rc" "$rep"
 }

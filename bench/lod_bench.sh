@@ -143,7 +143,7 @@ if [[ $BUILD == 1 ]]; then
         rm -rf "$out"
         log=$RUNS/build-$name.log
         rc=0
-        run "$log" "$log.time" "$bin" build "$DEM" -o "$out" --formats glb --threads 2 \
+        run "$log" "$log.time" "$bin" build "$DEM" -o "$out" --layer terrain --formats glb --threads 2 \
             --max-zoom "$top" || rc=$?
         w=$(wall "$log.time")
         n=$(find "$out" -name '*.glb' | wc -l)

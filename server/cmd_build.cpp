@@ -1,6 +1,7 @@
 // terrabound build: pre-generate a layer's tile pyramid into a directory or an SQLite file.
 // The work is tiler/pyramid/build.cpp; this file parses options, handles SIGINT/SIGTERM and
 // reports.
+#include "config/config.hpp"
 #include "core/error.hpp"
 #include "server/commands.hpp"
 #include "tiler/dem_tiles.hpp"
@@ -90,6 +91,20 @@ std::string human_bytes(std::int64_t bytes) {
     return buf;
 }
 
+// What a build makes without --formats: what serve serves its clients (3D Tiles, globe terrain
+// in both providers' formats, raster DEM), leaving out drc and mapbox, which only some clients
+// want instead of glb and terrarium; a single-file DEM container holds terrarium.
+std::vector<tiler::Format> default_formats(const std::string& output) {
+    const bool container = output.ends_with(".mbtiles") || output.ends_with(".pmtiles");
+    if (container) {
+        return {tiler::Format::Terrarium};
+    }
+    return {tiler::Format::Glb,
+            tiler::Format::Terrain,
+            tiler::Format::Terrain3d,
+            tiler::Format::Terrarium};
+}
+
 int run(const Args& args) {
     tiler::BuildOptions o;
     o.layer.sources = args.positional;
@@ -102,6 +117,11 @@ int run(const Args& args) {
                          ".sqlite)");
     }
     o.output = *out;
+    // Named as `serve DEM` names it, so the URLs of a static copy are the server's.
+    o.layer.name = config::layer_name_from_path(o.layer.sources[0]);
+    if (o.layer.name.empty()) {
+        o.layer.name = "terrain";
+    }
     if (auto v = args.get("layer")) {
         o.layer.name = *v;
     }
@@ -141,6 +161,7 @@ int run(const Args& args) {
     if (auto v = args.get("bbox")) {
         o.bbox = parse_bbox(*v);
     }
+    o.formats = default_formats(o.output);
     if (auto v = args.get("formats")) {
         o.formats = parse_formats(*v);
     }
@@ -228,9 +249,13 @@ const Command& build_command() {
          {
              {"o",
               "OUT",
-              "output: a directory, a file ending in .sqlite (or .db), or OUT.mbtiles (MBTiles 1.3) "
+              "output: a directory, a file ending in .sqlite (or .db), or OUT.mbtiles "
+              "(MBTiles 1.3) "
               "or OUT.pmtiles (PMTiles v3) of one DEM encoding: --formats terrarium or mapbox"},
-             {"layer", "NAME", "layer name, [A-Za-z0-9_-]+ (default terrain)"},
+             {"layer",
+              "NAME",
+              "layer name, [A-Za-z0-9_-]+ (default: the first INPUT's file name, as serve names "
+              "it: N44W072.hgt -> N44W072)"},
              {"scheme", "S", "geodetic (default) or mercator"},
              {"size", "N", "tile raster is (N+1) x (N+1) samples (default 256)"},
              {"min-zoom", "Z", "coarsest zoom (default: from the sources)"},
@@ -239,7 +264,9 @@ const Command& build_command() {
              {"bbox", "W,S,E,N", "only tiles meeting this box, degrees (no tileset is written)"},
              {"formats",
               "LIST",
-              "comma-separated: glb, drc, terrarium, mapbox, terrain, terrain3d (default glb); "
+              "comma-separated: glb, drc, terrarium, mapbox, terrain, terrain3d (default "
+              "glb,terrain,terrain3d,terrarium: what CesiumJS, three.js, deck.gl and MapLibre "
+              "read; terrarium alone for .mbtiles and .pmtiles); "
               "terrarium and mapbox are PNG DEM tiles (EPSG:3857 XYZ) under OUT/{layer}/dem/; "
               "terrain is quantized-mesh with OUT/{layer}/layer.json, terrain3d 3D Tiles "
               "terrain with OUT/{layer}/terrain/tileset.json (both geodetic, from zoom 0)"},

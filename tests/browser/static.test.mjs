@@ -17,7 +17,8 @@ import {
 } from './helpers.mjs';
 
 const NGINX = process.env.TB_NGINX || '/usr/sbin/nginx';
-const LAYER = 'terrain'; // build's default layer name
+// build's default layer name, the one `serve DEM` gives it: the file's name without extensions.
+const LAYER = path.basename(DEM).split('.')[0];
 const skip = missingPrerequisite({ browser: true }) ||
   (fs.existsSync(NGINX) ? null : `${NGINX} not found: apt-get install -y nginx-light (or set TB_NGINX)`);
 
@@ -67,8 +68,9 @@ before(async () => {
   await fsp.chmod(work, 0o755); // nginx's workers may run as another user
   const out = path.join(work, 'out');
   const port = await freePort();
-  await execFileP(TB_BINARY, ['build', DEM, '-o', out, '--formats', 'terrain,terrain3d,terrarium',
-    '--base-url', `http://127.0.0.1:${port}`, '--summary-dir', 'off'], { maxBuffer: 1 << 26 });
+  // Default formats and layer name: what a newcomer gets.
+  await execFileP(TB_BINARY, ['build', DEM, '-o', out, '--base-url', `http://127.0.0.1:${port}`,
+    '--summary-dir', 'off'], { maxBuffer: 1 << 26 });
   nginx = await startNginx(out, port);
   pages = await startStaticWeb();
   browser = await launchBrowser({ width: 960, height: 640 });
@@ -101,6 +103,8 @@ test('nginx sends the built files with the headers clients need, and no hidden f
     assert.ok(body.length > 88, 'a quantized-mesh header at least');
     const doc = await fetchJson(`${nginx.url}/${LAYER}/layer.json`);
     assert.deepEqual(doc.extensions, ['metadata']);
+    const tileset = await fetchJson(`${nginx.url}/${LAYER}/tileset.json`); // glb by default too
+    assert.equal(tileset.asset.version, '1.1');
     const glb = await fetch(`${nginx.url}/${LAYER}/terrain/0/0/0/0.glb`, origin);
     assert.equal(glb.headers.get('content-type'), 'model/gltf-binary');
     const tilejson = await fetchJson(`${nginx.url}/${LAYER}/dem/tilejson.json`);

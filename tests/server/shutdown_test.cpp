@@ -210,7 +210,9 @@ TEST_CASE("terrabound serve replaces its own stored tiles when the eps changes, 
                          "--max-zoom",
                          "7",
                          "--eps-finest",
-                         "1"},
+                         "1",
+                         "--formats",
+                         "glb"},
                         dir / "build.log") == 0);
     CHECK(run_to_exit({"serve", config("coarse.json", 40, "built.sqlite"), "--port", "0"},
                       dir / "refused.log") == 2);

@@ -224,7 +224,10 @@ std::vector<std::string> tileset_tiles(const fs::path& layer_dir) {
     return tiles;
 }
 
-const std::vector<std::string> kSmall = {"--size", "32", "--min-zoom", "7", "--max-zoom", "9"};
+// Small pyramids, named and formatted as these tests expect (the command's own defaults are
+// checked in "build without --layer or --formats ...").
+const std::vector<std::string> kSmall = {
+    "--size", "32", "--min-zoom", "7", "--max-zoom", "9", "--layer", "terrain", "--formats", "glb"};
 
 // The layer a build with kSmall makes of `dem`, opened in-process.
 std::shared_ptr<const Layer> small_layer(const std::string& dem) {
@@ -549,8 +552,18 @@ TEST_CASE("build makes a decodable pyramid of a real DEM with nodata (elev.tif)"
         return;
     }
     BuildDir dir;
-    const Run r = run(
-        {"build", dem, "-o", dir / "lux.sqlite", "--size", "32", "--layer", "lux", "--json"}, dir);
+    const Run r = run({"build",
+                       dem,
+                       "-o",
+                       dir / "lux.sqlite",
+                       "--size",
+                       "32",
+                       "--layer",
+                       "lux",
+                       "--formats",
+                       "glb",
+                       "--json"},
+                      dir);
     INFO(r.err);
     REQUIRE(r.code == 0);
     CHECK(r.out.find("\"tileset_written\":true") != std::string::npos);
@@ -907,6 +920,31 @@ TEST_CASE("build --terrain-extensions all keeps the layer's whole terrain tiles 
     const Run bad = run(args(dem, dir / "bad", {"--terrain-extensions", "normals"}), dir);
     CHECK(bad.code != 0);
     CHECK(bad.err.find("unknown name 'normals'") != std::string::npos);
+}
+
+TEST_CASE("build without --layer or --formats names the layer after its first input, as serve "
+          "does, and makes glb, terrain, terrain3d and terrarium with their documents") {
+    BuildDir dir;
+    const auto dem = write_dem(dir / "Alps_10m.v2.tif");
+    const Run a =
+        run({"build", dem, "-o", dir / "out", "--size", "32", "--min-zoom", "7", "--max-zoom", "8"},
+            dir);
+    INFO(a.err);
+    REQUIRE(a.code == 0);
+    const fs::path layer = dir.path / "out/Alps_10m";
+    for (const char* doc : {"tileset.json",
+                            "layer.json",
+                            "terrain/tileset.json",
+                            "dem/tilejson.json",
+                            "build-manifest.json"}) {
+        CAPTURE(doc);
+        CHECK(fs::exists(layer / doc));
+    }
+    CHECK(fs::exists(layer / "0/0/0.terrain"));
+    CHECK_FALSE(fs::exists(layer / "dem/mapbox"));
+    CHECK(slurp(layer / "build-manifest.json")
+              .find(R"("formats": ["glb", "terrain", "terrain3d", "terrarium"])") !=
+          std::string::npos);
 }
 
 TEST_CASE("a directory build writes the host files, whose rules cover every file it holds, and "

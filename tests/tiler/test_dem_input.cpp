@@ -75,7 +75,7 @@ void check_json_numbers(const nlohmann::json& j) {
     }
 }
 
-const char* kBuild = " --size 32 --threads 1";
+const char* kBuild = " --size 32 --threads 1 --layer terrain --formats glb";
 
 } // namespace
 
@@ -132,7 +132,7 @@ TEST_CASE("outliers (+-3.4e38, a 3e38 spike) are nodata: one warning names them,
     CHECK(i.out.find("outliers:    3 sample(s) outside -12000 .. 9000 m") != std::string::npos);
     const Run b = run(dir,
                       "build " + dem + " -o " + dir.file("out") + " --formats glb,terrain" +
-                          " --threads 1 --json");
+                          " --threads 1 --layer terrain --json");
     REQUIRE_MESSAGE(b.code == 0, b.err);
     CHECK(b.err.find("3 sample(s) outside the plausible range of heights (-12000 .. 9000 m") !=
           std::string::npos);
@@ -156,9 +156,10 @@ TEST_CASE("outliers (+-3.4e38, a 3e38 spike) are nodata: one warning names them,
     }
     CHECK(headers > 0);
     // A wider range keeps the 3e38 spike out still, and records itself in the manifest.
-    const Run wide = run(dir,
-                         "build " + dem + " -o " + dir.file("wide") +
-                             " --formats glb --threads 1 --valid-range -12000,12000");
+    const Run wide =
+        run(dir,
+            "build " + dem + " -o " + dir.file("wide") +
+                " --formats glb --threads 1 --layer terrain --valid-range -12000,12000");
     REQUIRE_MESSAGE(wide.code == 0, wide.err);
     CHECK(wide.err.find("(-12000 .. 12000 m; --valid-range") != std::string::npos);
     CHECK(slurp(dir.file("wide/terrain/build-manifest.json"))

@@ -226,7 +226,7 @@ TEST_CASE("build -o OUT.mbtiles refuses mesh formats and two DEM encodings, sayi
     TempDir dir;
     const auto dem = write_dem(dir / "dem.tif");
     const std::string out = dir / "out.mbtiles";
-    const Run glb = run({"build", dem, "-o", out}, dir);
+    const Run glb = run({"build", dem, "-o", out, "--formats", "glb"}, dir);
     CHECK(glb.code == 2);
     CHECK(glb.err.find("holds raster DEM tiles (terrarium or mapbox, EPSG:3857 XYZ PNG) only, not "
                        "glb; build --formats terrarium") != std::string::npos);

@@ -121,8 +121,18 @@ std::string write_hill(const std::string& path) {
     return tb_test::write_fixture(path, f);
 }
 
-const char* const kBuildArgs[] = {
-    "--size", "32", "--min-zoom", "8", "--max-zoom", "9", "--threads", "1"};
+const char* const kBuildArgs[] = {"--size",
+                                  "32",
+                                  "--min-zoom",
+                                  "8",
+                                  "--max-zoom",
+                                  "9",
+                                  "--threads",
+                                  "1",
+                                  "--layer",
+                                  "terrain",
+                                  "--formats",
+                                  "glb"};
 
 // `terrabound build DEM -o OUT <kBuildArgs> <extra>`, started in the background; stderr to `err`.
 pid_t spawn_build(const std::string& dem,

@@ -282,7 +282,7 @@ TEST_CASE("build -o OUT.pmtiles writes every DEM tile of the layer, and --resume
     CHECK(store->get(dem_key(id, Format::Terrarium)) ==
           expected_dem_tiles(dem, Format::Terrarium).at(id));
 
-    const Run glb = run({"build", dem, "-o", dir / "mesh.pmtiles"}, dir);
+    const Run glb = run({"build", dem, "-o", dir / "mesh.pmtiles", "--formats", "glb"}, dir);
     CHECK(glb.code == 2);
     CHECK(glb.err.find("a PMTiles archive holds raster DEM tiles") != std::string::npos);
 }
