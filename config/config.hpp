@@ -1,5 +1,5 @@
 #pragma once
-// The server configuration: a JSON file (schema in the README, "Configuration") read into plain
+// The server configuration: a JSON file (schema in docs/serving.md, "Configuration") read into plain
 // structs. Only config/config.cpp sees nlohmann-json.
 //
 // Every problem in a file is collected and reported together, one line each, with the JSON

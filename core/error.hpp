@@ -1,5 +1,5 @@
 #pragma once
-// The one error family of Terrabound (see the README, "Errors").
+// The one error family of Terrabound (see docs/commands.md: one line, exit 2 or 3).
 // InputError: bad DEM, eps, config, URL      -> HTTP 400, exit 2
 // NotFound:   tile outside the pyramid/data  -> HTTP 404
 // IoError:    read/write/store failure       -> HTTP 500, exit 3

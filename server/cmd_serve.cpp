@@ -475,7 +475,7 @@ const Command& serve_command() {
            "keep generated tiles in this store for every layer: a directory, or a file "
            "ending in .sqlite or .db"}},
          "With DEM files, each becomes a layer named after its file, with default settings.\n"
-         "With a config file (JSON), every setting is explicit; see the README, "
+         "With a config file (JSON), every setting is explicit; see docs/serving.md, "
          "\"Configuration\".\n"
          "Routes (every layer, {layer} = its name):\n"
          "  /{layer}/tileset.json               3D Tiles (CesiumJS, three.js, deck.gl)\n"

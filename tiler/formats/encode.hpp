@@ -46,7 +46,7 @@ inline constexpr double kSagRadius = 6335439.0;
 inline constexpr double kSagMargin = 2.0;
 // The share of eps reserved for sag. A smaller share shortens the longest edge allowed (as the
 // square root of the share) and leaves the mesher more of eps everywhere else. Measured on the
-// SRTM cells of bench/ (tile_bench, build_bench; README "The sag share"), a tenth against the
+// SRTM cells of bench/ (tile_bench, build_bench; docs/performance.md, "The sag share"), a tenth against the
 // quarter it replaced: 3-22 % fewer triangles and bytes per tile and up to 27 % less time on
 // rough or mixed ground, and about the same (0.7 % more triangles) on flat ground at the finest
 // zoom, where the shorter edges bind.
