@@ -1,10 +1,10 @@
 // PMTiles v3: header, directories, Hilbert ids, gzip, metadata (pmtiles_format.hpp).
 #include "tiler/stores/pmtiles_format.hpp"
 
+#include "tiler/gzip.hpp"
+
 #include "core/error.hpp"
 #include "tiler/json_number.hpp"
-
-#include <zlib.h>
 
 #include <algorithm>
 #include <cmath>
@@ -293,50 +293,15 @@ std::vector<Entry> decode_directory(std::string_view raw,
 }
 
 std::string gzip(std::string_view bytes) {
-    z_stream z{};
-    // windowBits 15 + 16: a gzip wrapper, as PMTiles readers expect.
-    if (deflateInit2(&z, 6, Z_DEFLATED, 15 + 16, 8, Z_DEFAULT_STRATEGY) != Z_OK) {
-        throw IoError("gzip: zlib could not start");
-    }
-    std::string out(deflateBound(&z, static_cast<uLong>(bytes.size())), '\0');
-    z.next_in = reinterpret_cast<Bytef*>(const_cast<char*>(bytes.data()));
-    z.avail_in = static_cast<uInt>(bytes.size());
-    z.next_out = reinterpret_cast<Bytef*>(out.data());
-    z.avail_out = static_cast<uInt>(out.size());
-    const int rc = deflate(&z, Z_FINISH);
-    out.resize(z.total_out);
-    deflateEnd(&z);
-    if (rc != Z_STREAM_END) {
-        throw IoError("gzip: zlib failed to compress " + std::to_string(bytes.size()) + " bytes");
-    }
-    return out;
+    return gzip_compress(bytes, 6);
 }
 
 std::string gunzip(std::string_view bytes, std::size_t max_out, const std::string& name) {
-    z_stream z{};
-    if (inflateInit2(&z, 15 + 16) != Z_OK) {
-        throw IoError(name + ": zlib could not start");
+    if (auto out = gzip_decompress(bytes, max_out)) {
+        return std::move(*out);
     }
-    std::string out;
-    char buf[16384];
-    z.next_in = reinterpret_cast<Bytef*>(const_cast<char*>(bytes.data()));
-    z.avail_in = static_cast<uInt>(bytes.size());
-    int rc = Z_OK;
-    while (rc != Z_STREAM_END) {
-        z.next_out = reinterpret_cast<Bytef*>(buf);
-        z.avail_out = sizeof buf;
-        rc = inflate(&z, Z_NO_FLUSH);
-        const std::size_t got = sizeof buf - z.avail_out;
-        if ((rc != Z_OK && rc != Z_STREAM_END) || (rc == Z_OK && got == 0 && z.avail_in == 0) ||
-            out.size() + got > max_out) {
-            inflateEnd(&z);
-            throw InputError(name + ": a gzip-compressed section is damaged or longer than " +
-                             std::to_string(max_out) + " bytes; the file is damaged");
-        }
-        out.append(buf, got);
-    }
-    inflateEnd(&z);
-    return out;
+    throw InputError(name + ": a gzip-compressed section is damaged or longer than " +
+                     std::to_string(max_out) + " bytes; the file is damaged");
 }
 
 } // namespace tb::tiler::pmtiles
