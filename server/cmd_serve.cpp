@@ -473,7 +473,8 @@ const Command& serve_command() {
           {"store",
            "PATH",
            "keep generated tiles in this store for every layer: a directory, or a file "
-           "ending in .sqlite or .db"}},
+           "ending in .sqlite or .db; or serve the raster DEM tiles a build wrote to an "
+           ".mbtiles or .pmtiles file (other tiles are kept in memory)"}},
          "With DEM files, each becomes a layer named after its file, with default settings.\n"
          "With a config file (JSON), every setting is explicit; see docs/serving.md, "
          "\"Configuration\".\n"

@@ -5,6 +5,7 @@
 #include "tiler/log.hpp"
 #include "tiler/pyramid/tile_settings.hpp"
 
+#include <filesystem>
 #include <sys/stat.h>
 
 namespace tb::server {
@@ -21,6 +22,15 @@ void attach_store(ServedLayer& served, const config::LayerConfig& layer, Stores&
         return;
     }
     auto& store = stores[*layer.store];
+    if (!store && layer.store->ends_with(".pmtiles") && !std::filesystem::exists(*layer.store)) {
+        // A PMTiles archive is written once, by a build; a server could only stage tiles that
+        // never become an archive.
+        throw InputError("layer " + layer.options.name + ": store " + *layer.store +
+                         " does not exist; serve reads a .pmtiles archive that terrabound build "
+                         "made (build DEM -o " +
+                         *layer.store +
+                         "), or give it a directory or a .sqlite file to keep tiles in");
+    }
     if (!store) {
         store = tiler::TileStore::open(*layer.store);
         log::info("store: " + store->describe());

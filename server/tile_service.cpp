@@ -541,7 +541,7 @@ void TileService::Impl::generate(const TileRequest& r, Promise& promise, Job& jo
 // Stores (a payload) and caches what a generation made, even when nobody waits any more: the
 // next request is a hit.
 void TileService::Impl::keep(const TileRequest& r, const std::shared_ptr<const Blob>& made) {
-    if (made->failure == 0 && r.in_store()) {
+    if (made->failure == 0 && r.in_store() && r.served->store->keeps(r.store_key())) {
         try {
             r.served->store->put(r.store_key(), made->bytes);
         } catch (const std::exception& e) {

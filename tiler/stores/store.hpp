@@ -76,6 +76,14 @@ public:
     // here (PMTiles), MBTiles records its bounds and zooms. The other stores have nothing to do.
     virtual void finish() {}
 
+    // Whether put(key) would keep the tile: false where a container cannot hold it (another
+    // layer, format or encoding than its own) or no longer takes tiles (a finished PMTiles
+    // archive), so that a server asks before it writes instead of logging a refusal per tile.
+    virtual bool keeps(const TileKey& key) const {
+        (void)key;
+        return true;
+    }
+
     virtual std::string describe() const = 0; // "directory OUT" / "sqlite OUT.sqlite"
     // True when only Terrabound writes what the store holds (an SQLite store's tables), false
     // when other programs may have put files there too (a directory).

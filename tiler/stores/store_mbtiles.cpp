@@ -85,6 +85,13 @@ void MbtilesStore::check_key(const TileKey& key) const {
     }
 }
 
+bool MbtilesStore::keeps(const TileKey& key) const {
+    std::lock_guard lock(mutex_);
+    return is_dem_format(key.format) && key.eps_level < 0 && key.id.x < rows_at(key.id.z) &&
+           key.id.y < rows_at(key.id.z) && (layer_.empty() || key.layer == layer_) &&
+           (!format_ || *format_ == key.format);
+}
+
 // Makes `layer` (and `format`, when given) what the file holds, or refuses a second one.
 void MbtilesStore::claim(const std::string& layer, std::optional<Format> format) {
     if (layer_.empty()) {

@@ -40,6 +40,7 @@ public:
     bool contains(const TileKey& key) const override { return get(key).has_value(); }
     void put(const TileKey& key, std::string_view bytes) override;
     void put_batch(std::span<const StoredTile> tiles) override;
+    bool keeps(const TileKey& key) const override;
     std::optional<std::string> get_document(const std::string& layer,
                                             const std::string& name) const override;
     void put_document(const std::string& layer,

@@ -100,6 +100,10 @@ public:
         return reader_->tile(key.id);
     }
     bool contains(const TileKey& key) const override { return get(key).has_value(); }
+    bool keeps(const TileKey& key) const override {
+        std::lock_guard lock(mutex_);
+        return staging_ && staging_->keeps(key);
+    }
 
     void put(const TileKey& key, std::string_view bytes) override {
         writable("write tile " + std::to_string(key.id.z) + "/" + std::to_string(key.id.x) + "/" +
