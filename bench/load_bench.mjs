@@ -6,7 +6,11 @@
 // tiles (every tile of every zoom and eps level of the first layer) for DURATION
 // seconds or MAX_REQUESTS requests. Meanwhile one probe asks for /health and one for a cached
 // tile every PROBE_MS, and the server's RSS is sampled every 500 ms.
-// A tile refused with 503 is asked again after the others. Prints TSV lines: case, requests, req/s, status mix, p50 ms, p99 ms, max ms (and RSS).
+// With RETRY_AFTER=1 a client waits the Retry-After of a 503 before its next request.
+// With DISTINCT > 0 the cold tiles are a sample of that many (seeded by SEED), spread over
+// every zoom. A tile refused with 503 is asked again after the others. Prints TSV lines: case,
+// requests, req/s, status mix, p50 ms, p99 ms, max ms; then RSS every 5 s and a summary:
+// accepted (200) p99, the share answered 503, client timeouts, and peak RSS against MEMORY_MB.
 import http from 'node:http';
 import net from 'node:net';
 import fs from 'node:fs';
@@ -21,6 +25,12 @@ const IDLE = env('IDLE', 1000);
 const SLOW = env('SLOW', 100);
 const MAX_REQUESTS = env('MAX_REQUESTS', 200000);
 const PROBE_MS = env('PROBE_MS', 20);
+const DISTINCT = env('DISTINCT', 0);
+const SEED = env('SEED', 1);
+const MEMORY_MB = env('MEMORY_MB', 0);
+// 1: a client that got 503 waits its Retry-After before its next request, as a viewer does;
+// 0: it asks again at once (the most pressure on the server).
+const RETRY_AFTER = env('RETRY_AFTER', 0);
 const HOST = '127.0.0.1';
 
 const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
@@ -46,10 +56,12 @@ function get(agent, path) {
         const req = http.get({ host: HOST, port: PORT, path, agent }, (res) => {
             res.resume();
             res.on('end', () =>
-                resolve({ status: res.statusCode, ms: Number(process.hrtime.bigint() - start) / 1e6 }));
+                resolve({ status: res.statusCode, ms: Number(process.hrtime.bigint() - start) / 1e6,
+                          retry_after: Number(res.headers['retry-after'] || 0) }));
         });
         req.setTimeout(30000, () => req.destroy(new Error('timeout')));
-        req.on('error', () => resolve({ status: 0, ms: Number(process.hrtime.bigint() - start) / 1e6 }));
+        req.on('error', (e) =>
+            resolve({ status: 0, ms: Number(process.hrtime.bigint() - start) / 1e6, error: e.code || e.message }));
     });
 }
 
@@ -107,12 +119,32 @@ function tile_urls(layer) {
     return urls;
 }
 
+// `count` of `v` (all when 0 or more than v has), in an order drawn from `seed`: a
+// Fisher-Yates shuffle driven by mulberry32, so runs before and after a change ask the same.
+function sample(v, count, seed) {
+    let a = seed >>> 0;
+    const random = () => {
+        a = (a + 0x6d2b79f5) >>> 0;
+        let t = a;
+        t = Math.imul(t ^ (t >>> 15), t | 1);
+        t ^= t + Math.imul(t ^ (t >>> 7), t | 61);
+        return ((t ^ (t >>> 14)) >>> 0) / 4294967296;
+    };
+    const out = [...v];
+    for (let i = out.length - 1; i > 0; --i) {
+        const j = Math.floor(random() * (i + 1));
+        [out[i], out[j]] = [out[j], out[i]];
+    }
+    return count > 0 ? out.slice(0, count) : out;
+}
+
 const layer = (await json('/layers')).layers[0];
 const urls = tile_urls(layer);
 const cached = urls[0];
 const probe_agent = new http.Agent({ keepAlive: true, maxSockets: 2 });
 await get(probe_agent, cached); // generated once: from now on a cache hit
-const cold = urls.slice(1);
+const cold = DISTINCT > 0 ? sample(urls.slice(1), DISTINCT, SEED) : urls.slice(1);
+if (DISTINCT > cold.length) console.error(`load_bench: only ${cold.length} distinct cold tiles`);
 
 // Idle and slow connections; each reconnects when the server closes it (idle timeout, 408),
 // so the pressure lasts the whole run.
@@ -166,6 +198,7 @@ const probes = [start_probe('/health'), start_probe(cached)];
 // The load: cold tiles, each asked once, by CONCURRENCY keep-alive clients.
 const load_agent = new http.Agent({ keepAlive: true, maxSockets: CONCURRENCY });
 const statuses = new Map();
+const errors = new Map(); // status 0: the request failed, by error code
 const retry = []; // tiles refused with 503, asked again once the list is through
 const lat = [], lat_ok = [], lat_busy = [];
 let next = 0, sent = 0;
@@ -176,11 +209,13 @@ const worker = async () => {
         ++sent;
         const r = await get(load_agent, url);
         statuses.set(r.status, (statuses.get(r.status) || 0) + 1);
+        if (r.error) errors.set(r.error, (errors.get(r.error) || 0) + 1);
         lat.push(r.ms);
         if (r.status === 200) lat_ok.push(r.ms);
         if (r.status === 503) {
             lat_busy.push(r.ms);
             retry.push(url);
+            if (RETRY_AFTER && r.retry_after > 0) await sleep(r.retry_after * 1000);
         }
     }
 };
@@ -218,6 +253,20 @@ console.log(['cached_tile_probe', hot.length, '-', `failed:${failed(hot)}`, fmt(
 console.log(['background', IDLE + SLOW, '-', `idle:${IDLE},slow:${SLOW},idle_reconnects:${idle_reconnects},slow_reconnects:${slow_reconnects}`,
              `open_at_end:${gauge('tb_http_connections')}`, `timeouts:${gauge('tb_http_timeouts_total')}`,
              `tiles_generated:${gauge('tb_tiles_generated_total')}`].join('\t'));
-console.log(['rss_mb', rss.length, '-', rss.map(([t, m]) => `${t.toFixed(1)}s:${fmt(m)}`).join(','),
-             fmt(rss[0][1]), fmt(max_of(rss.map(([, m]) => m))), fmt(rss[rss.length - 1][1])].join('\t'));
+// RSS every 5 s (sampled every 500 ms), with the first, peak and last sample.
+const rss_peak = max_of(rss.map(([, m]) => m));
+const every_5s = [];
+for (const sample of rss) {
+    if (!every_5s.length || sample[0] >= every_5s[every_5s.length - 1][0] + 5) every_5s.push(sample);
+}
+if (every_5s[every_5s.length - 1] !== rss[rss.length - 1]) every_5s.push(rss[rss.length - 1]);
+console.log(['rss_mb', rss.length, '-', every_5s.map(([t, m]) => `${t.toFixed(1)}s:${fmt(m)}`).join(','),
+             fmt(rss[0][1]), fmt(rss_peak), fmt(rss[rss.length - 1][1])].join('\t'));
+const count = (status) => statuses.get(status) || 0;
+console.log(['summary', `distinct:${cold.length}`, `accepted_p99_ms:${fmt(quantile(lat_ok, 0.99))}`,
+             `share_503:${fmt((100 * count(503)) / sent)}%`, `failed:${count(0)}(${[...errors.entries()].map(([e, n]) => `${e}:${n}`).join(',')})`,
+             `rss_peak_mb:${fmt(rss_peak)}`,
+             MEMORY_MB ? `memory_mb:${MEMORY_MB},peak/budget:${fmt(rss_peak / MEMORY_MB)}` : 'memory_mb:none',
+             `deadline_expiries:${gauge('tb_deadline_expiries_total') ?? '-'}`,
+             `generations_cancelled:${gauge('tb_generations_cancelled_total') ?? '-'}`].join('\t'));
 process.exit(0);

@@ -8,8 +8,18 @@
 #
 # Environment: TB_BIN (default: a Release build in build-bench/), DURATION (s, default 20),
 #   CONCURRENCY (default 128), IDLE (default 1000), SLOW (default 100), MAX_REQUESTS (200000),
-#   THREADS (generation threads, default 0: one per core), QUEUE_LIMIT (default 64).
-# Bounded: DURATION seconds of load, at most MAX_REQUESTS requests, each tile asked once.
+#   THREADS (generation threads, default 0: one per core), QUEUE_LIMIT (default 64),
+#   MIN_ZOOM, MAX_ZOOM (default 8, 12), EPS_LEVELS (default "2, 4, 8"; empty: none),
+#   DISTINCT (cold tiles asked: a seeded sample of that many; default 0: every tile), SEED (1),
+#   RETRY_AFTER (1: a client waits a 503's Retry-After before asking again; default 0: at once),
+#   and the server settings MEMORY_MB, CACHE_MB, START_WAIT_MS, DEADLINE_MS (unset: the
+#   server's defaults; an older binary rejects a key it does not know).
+# Bounded: DURATION seconds of load, at most MAX_REQUESTS requests, each tile asked until it is
+# answered 200 (a 503 puts it back at the end of the list).
+#
+# The issue-37 case (100 connections over 1,000 distinct uncached tiles for 60 s):
+#   CONCURRENCY=100 DURATION=60 IDLE=0 SLOW=0 DISTINCT=1000 RETRY_AFTER=1 MIN_ZOOM=11 \
+#   MAX_ZOOM=14 EPS_LEVELS= MEMORY_MB=512 bench/load_bench.sh bench/runs/lod/N48W125-x4.tif
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
@@ -39,14 +49,21 @@ cleanup() {
 }
 trap cleanup EXIT
 
-# Zooms 8..12 (max_zoom 12 as in http_bench.sh) and three eps levels: a few thousand distinct
-# cold tiles, more than the run can generate, so generation stays saturated.
+# By default zooms 8..12 (max_zoom 12 as in http_bench.sh) and three eps levels: a few thousand
+# distinct cold tiles, more than the run can generate, so generation stays saturated.
+optional=
+for pair in memory_mb:MEMORY_MB cache_mb:CACHE_MB start_wait_ms:START_WAIT_MS \
+            deadline_ms:DEADLINE_MS; do
+    key=${pair%%:*} var=${pair#*:}
+    if [ -n "${!var:-}" ]; then optional="$optional, \"$key\": ${!var}"; fi
+done
 cat >"$WORK/load.json" <<JSON
 {"server": {"host": "127.0.0.1", "port": 0, "threads": ${THREADS:-0}, "log_level": "warn",
-            "queue_limit": ${QUEUE_LIMIT:-64}},
- "layers": [{"name": "load", "sources": ["$DEM"], "max_zoom": 12, "min_zoom": 8,
-             "eps_levels": [2, 4, 8], "formats": ["glb"]}]}
+            "queue_limit": ${QUEUE_LIMIT:-64}$optional},
+ "layers": [{"name": "load", "sources": ["$DEM"], "max_zoom": ${MAX_ZOOM:-12},
+             "min_zoom": ${MIN_ZOOM:-8}, "eps_levels": [${EPS_LEVELS-2, 4, 8}], "formats": ["glb"]}]}
 JSON
+log "config: $(tr -s ' \n' ' ' <"$WORK/load.json")"
 # log_level warn (one line per request would slow the run), so the port is chosen here and the
 # server is up once /health answers.
 PORT=$(node -e 'const s=require("net").createServer().listen(0,"127.0.0.1",()=>{console.log(s.address().port);s.close()})')
