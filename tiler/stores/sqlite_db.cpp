@@ -10,7 +10,9 @@ namespace {
 
 constexpr int kBusyTimeoutMs = 30000;
 
-std::string advice(int code) {
+} // namespace
+
+std::string sqlite_advice(int code) {
     switch (code & 0xff) {
     case SQLITE_FULL:
         return "the disk is full; free space and try again";
@@ -34,8 +36,6 @@ std::string advice(int code) {
     }
 }
 
-} // namespace
-
 SqliteDb::SqliteDb(std::string path, bool create) : path_(std::move(path)) {
     std::error_code ec;
     const auto parent = std::filesystem::path(path_).parent_path();
@@ -50,7 +50,7 @@ SqliteDb::SqliteDb(std::string path, bool create) : path_(std::move(path)) {
         const std::string msg = db_ ? sqlite3_errmsg(db_) : sqlite3_errstr(rc);
         sqlite3_close_v2(db_);
         db_ = nullptr;
-        throw IoError(path_ + ": cannot open (" + msg + "); " + advice(rc));
+        throw IoError(path_ + ": cannot open (" + msg + "); " + sqlite_advice(rc));
     }
     sqlite3_extended_result_codes(db_, 1);
     sqlite3_busy_timeout(db_, kBusyTimeoutMs);
@@ -69,7 +69,7 @@ SqliteDb::~SqliteDb() {
 
 void SqliteDb::fail(int rc, const std::string& action) const {
     const char* msg = db_ ? sqlite3_errmsg(db_) : sqlite3_errstr(rc);
-    throw IoError(path_ + ": cannot " + action + " (" + msg + "); " + advice(rc));
+    throw IoError(path_ + ": cannot " + action + " (" + msg + "); " + sqlite_advice(rc));
 }
 
 void SqliteDb::exec(const std::string& sql, const std::string& action) const {

@@ -24,6 +24,9 @@ struct SqliteReset {
     }
 };
 
+// What to do about an SQLite result code, for the end of an error message.
+std::string sqlite_advice(int code);
+
 class SqliteDb {
 public:
     // Opens (creating when `create`) the database at `path` in WAL mode. IoError naming the

@@ -13,6 +13,7 @@
 #include "core/error.hpp"
 #include "tiler/log.hpp"
 #include "tiler/stores/checksum.hpp"
+#include "tiler/stores/sqlite_db.hpp"
 #include "tiler/stores/store.hpp"
 
 #include <filesystem>
@@ -30,30 +31,6 @@ namespace {
 
 constexpr int kSchemaVersion = 2;
 constexpr int kBusyTimeoutMs = 30000;
-
-std::string advice(int code) {
-    switch (code & 0xff) {
-    case SQLITE_FULL:
-        return "the disk is full; free space and try again";
-    case SQLITE_NOTADB:
-    case SQLITE_CORRUPT:
-        return "the file is not an SQLite database or is damaged; move it away or choose another "
-               "output path";
-    case SQLITE_READONLY:
-    case SQLITE_PERM:
-    case SQLITE_CANTOPEN:
-    case SQLITE_AUTH:
-        return "the file cannot be opened for writing; fix its permissions or choose another "
-               "output path";
-    case SQLITE_BUSY:
-    case SQLITE_LOCKED:
-        return "another process holds the database locked; stop it or try again later";
-    case SQLITE_IOERR:
-        return "the disk reported an I/O error; check it and try again";
-    default:
-        return "check the file, or choose another output path";
-    }
-}
 
 struct DbClose {
     void operator()(sqlite3* db) const { sqlite3_close_v2(db); }
@@ -223,7 +200,7 @@ public:
 private:
     [[noreturn]] void fail(int rc, const std::string& action) const {
         const char* msg = db_ ? sqlite3_errmsg(db_.get()) : sqlite3_errstr(rc);
-        throw IoError(path_ + ": cannot " + action + " (" + msg + "); " + advice(rc));
+        throw IoError(path_ + ": cannot " + action + " (" + msg + "); " + sqlite_advice(rc));
     }
 
     void check(int rc, const std::string& action) const {
