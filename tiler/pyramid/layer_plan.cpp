@@ -34,8 +34,15 @@ constexpr double kCesiumLevelError = 6378137.0 * 2 * 3.14159265358979323846 * 0.
 // the median glb tile of z7/z8/z9 falls from 13.8k/13.5k/37.6k triangles at the ladder to
 // 4.3k/4.5k/13.5k, and the median published bound rises from 215/94/41 m to 366/166/55 m.
 constexpr double kReachShare = 0.25;
-// The share of it globe terrain is meshed at, at least (see terrain_eps_for_zoom).
+// The share of it globe terrain is meshed at, at least (see terrain_eps_for_zoom): a quarter at
+// the finest zoom, which clients draw closest and upsample beyond; half above it, where a
+// finer tile takes over as the camera nears. With a quarter everywhere, tiles over the DEM's
+// own pixels at the zoom above the finest (twice its pixels, twice its eps) and the globe-wide
+// tiles of zooms 0-1 (edges short enough for the sag) were heavier than the finest zoom's: on
+// N44W072 the median z0/z1/z9 tile had 3.9k/4.1k/3.8k triangles against z10's 2.8k; with half,
+// 1.8k/1.6k/1.6k, and the pyramid's .terrain bytes 935 kB -> 738 kB.
 constexpr double kTerrainLevelShare = 0.25;
+constexpr double kTerrainCoarseShare = 0.5;
 // The largest share of eps globe terrain keeps for sag (terrain_budget_at).
 constexpr double kTerrainSagMost = 0.75;
 
@@ -77,12 +84,14 @@ double LayerPlan::eps_for_zoom(int z) const {
 }
 
 // The eps globe terrain is meshed at: the ladder, or a share of CesiumJS's own level error
-// where that is larger. CesiumJS picks quantized-mesh levels by its level error alone
-// (kCesiumLevelError / 2^z), so a tile drawn closer than that costs bytes no view shows; and
-// at coarse zooms straight triangles must follow the Earth's curve (the chord sag), which
-// at the ladder's eps takes a full lattice of triangles (131,072 at zoom 0).
+// (kTerrainLevelShare at the finest zoom, kTerrainCoarseShare above it) where that is larger.
+// CesiumJS picks quantized-mesh levels by its level error alone (kCesiumLevelError / 2^z), so a
+// tile drawn closer than that costs bytes no view shows; and at coarse zooms straight triangles
+// must follow the Earth's curve (the chord sag), which at the ladder's eps takes a full lattice of
+// triangles (131,072 at zoom 0).
 double LayerPlan::terrain_eps_for_zoom(int z) const {
-    return std::max(eps_for_zoom(z), kCesiumLevelError / std::exp2(z) * kTerrainLevelShare);
+    const double share = z < max_zoom_ ? kTerrainCoarseShare : kTerrainLevelShare;
+    return std::max(eps_for_zoom(z), kCesiumLevelError / std::exp2(z) * share);
 }
 
 ZoomSource LayerPlan::zoom_source(int z) const {
