@@ -43,9 +43,22 @@ SqliteDb::SqliteDb(std::string path, bool create) : path_(std::move(path)) {
         throw IoError(path_ + ": its parent directory " + parent.string() +
                       " does not exist; create it first or choose another output path");
     }
-    const int flags =
-        SQLITE_OPEN_READWRITE | SQLITE_OPEN_NOMUTEX | (create ? SQLITE_OPEN_CREATE : 0);
-    const int rc = sqlite3_open_v2(path_.c_str(), &db_, flags, nullptr);
+    open(SQLITE_OPEN_READWRITE | (create ? SQLITE_OPEN_CREATE : 0));
+    try {
+        exec("PRAGMA journal_mode=WAL", "switch to WAL");
+        exec("PRAGMA synchronous=NORMAL", "set synchronous");
+    } catch (...) {
+        sqlite3_close_v2(db_);
+        throw;
+    }
+}
+
+SqliteDb::SqliteDb(std::string path, SqliteReadOnly) : path_(std::move(path)) {
+    open(SQLITE_OPEN_READONLY);
+}
+
+void SqliteDb::open(int flags) {
+    const int rc = sqlite3_open_v2(path_.c_str(), &db_, flags | SQLITE_OPEN_NOMUTEX, nullptr);
     if (rc != SQLITE_OK) {
         const std::string msg = db_ ? sqlite3_errmsg(db_) : sqlite3_errstr(rc);
         sqlite3_close_v2(db_);
@@ -54,13 +67,6 @@ SqliteDb::SqliteDb(std::string path, bool create) : path_(std::move(path)) {
     }
     sqlite3_extended_result_codes(db_, 1);
     sqlite3_busy_timeout(db_, kBusyTimeoutMs);
-    try {
-        exec("PRAGMA journal_mode=WAL", "switch to WAL");
-        exec("PRAGMA synchronous=NORMAL", "set synchronous");
-    } catch (...) {
-        sqlite3_close_v2(db_);
-        throw;
-    }
 }
 
 SqliteDb::~SqliteDb() {

@@ -1,7 +1,8 @@
 #pragma once
-// One SQLite connection for the single-file containers (MBTiles, and PMTiles' staging file):
-// statements, transactions and SQLite's result codes turned into IoError naming the file, the
-// action and what to do. Not thread-safe: callers hold their own mutex.
+// One SQLite connection for the single-file containers (MBTiles, and PMTiles' staging file),
+// and for reading a store read-only (tiler/pyramid/convert.cpp): statements, transactions and
+// SQLite's result codes turned into IoError naming the file, the action and what to do. Not
+// thread-safe: callers hold their own mutex.
 #include <functional>
 #include <memory>
 #include <sqlite3.h>
@@ -27,11 +28,17 @@ struct SqliteReset {
 // What to do about an SQLite result code, for the end of an error message.
 std::string sqlite_advice(int code);
 
+// Selects SqliteDb's read-only constructor.
+struct SqliteReadOnly {};
+
 class SqliteDb {
 public:
     // Opens (creating when `create`) the database at `path` in WAL mode. IoError naming the
     // path when its parent directory is missing or SQLite refuses.
     SqliteDb(std::string path, bool create);
+    // Opens the existing database at `path` for reading only: the file keeps its journal mode
+    // and content. IoError naming the path when SQLite refuses.
+    SqliteDb(std::string path, SqliteReadOnly);
     ~SqliteDb();
     SqliteDb(const SqliteDb&) = delete;
     SqliteDb& operator=(const SqliteDb&) = delete;
@@ -54,6 +61,8 @@ public:
     const std::string& path() const { return path_; }
 
 private:
+    void open(int flags);
+
     std::string path_;
     sqlite3* db_ = nullptr;
 };
