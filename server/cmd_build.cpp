@@ -7,8 +7,10 @@
 #include "tiler/dem_tiles.hpp"
 #include "tiler/log.hpp"
 #include "tiler/pyramid/build.hpp"
+#include "tiler/pyramid/convert.hpp"
 #include "tiler/stores/store.hpp"
 
+#include <algorithm>
 #include <atomic>
 #include <csignal>
 #include <cstdio>
@@ -105,6 +107,73 @@ std::vector<tiler::Format> default_formats(const std::string& output) {
             tiler::Format::Terrarium};
 }
 
+// First SIGINT/SIGTERM: finish the tiles in flight and stop cleanly. The handler resets
+// itself, so a second one stops at once (atomic writes keep the store valid even then).
+void catch_stop_signals() {
+    struct sigaction action {};
+    action.sa_handler = on_signal;
+    action.sa_flags = SA_RESETHAND;
+    sigemptyset(&action.sa_mask);
+    sigaction(SIGINT, &action, nullptr);
+    sigaction(SIGTERM, &action, nullptr);
+}
+
+// `build STORE.sqlite -o OUT.pmtiles`: copies one layer's DEM tiles into the container
+// (tiler/pyramid/convert.hpp). Options that decide how tiles are made do not apply.
+int run_convert(const Args& args, const std::string& output) {
+    for (const auto& given : args.values) {
+        if (given.first != "o" && given.first != "layer" && given.first != "formats") {
+            throw InputError("build: --" + given.first + " does not apply when converting " +
+                             args.positional[0] +
+                             " (its tiles are copied as they are); drop it, or build from the "
+                             "DEM instead");
+        }
+    }
+    for (const auto& flag : args.flags) {
+        if (flag != "force" && flag != "json") {
+            throw InputError("build: --" + flag + " does not apply when converting " +
+                             args.positional[0] + " (a conversion is not resumed or sharded: " +
+                             "run it again, with --force to replace OUT)");
+        }
+    }
+    tiler::ConvertOptions o;
+    o.input = args.positional[0];
+    o.output = output;
+    o.layer = args.get("layer").value_or("");
+    o.force = args.has("force");
+    if (auto v = args.get("formats")) {
+        const auto formats = parse_formats(*v);
+        if (formats.size() != 1) {
+            throw InputError("build: --formats " + *v +
+                             ": a container holds one DEM encoding; convert --formats terrarium "
+                             "or --formats mapbox, one file each");
+        }
+        o.format = formats[0];
+    }
+    catch_stop_signals();
+    const tiler::ConvertSummary c = tiler::convert_store(o, g_stop);
+    if (c.interrupted) {
+        std::fprintf(stderr,
+                     "terrabound: conversion interrupted; %s was not written; run it again\n",
+                     o.output.c_str());
+        return 128 + (g_signal.load() ? g_signal.load() : SIGINT);
+    }
+    char seconds[32];
+    std::snprintf(seconds, sizeof seconds, "%.1f", c.seconds);
+    log::info("build: converted " + std::to_string(c.tiles) + " " + format_name(c.format) +
+              " DEM tiles of layer " + c.layer + ", " + human_bytes(c.bytes) + ", into " +
+              o.output + ", " + seconds + " s");
+    if (args.has("json")) {
+        tiler::BuildSummary s;
+        s.planned = s.written = s.dem_written = c.tiles;
+        s.bytes = c.bytes;
+        s.seconds = c.seconds;
+        std::printf("%s\n", tiler::to_json(s).c_str());
+        std::fflush(stdout);
+    }
+    return 0;
+}
+
 int run(const Args& args) {
     tiler::BuildOptions o;
     o.layer.sources = args.positional;
@@ -115,6 +184,14 @@ int run(const Args& args) {
     if (!out) {
         throw InputError("build: name the output with -o OUT (a directory, or a file ending in "
                          ".sqlite)");
+    }
+    const auto& inputs = o.layer.sources;
+    if (std::any_of(inputs.begin(), inputs.end(), tiler::is_store_input)) {
+        if (inputs.size() != 1) {
+            throw InputError("build: a .sqlite or .db input is a Terrabound store to convert, and "
+                             "is converted alone; name it as the only input");
+        }
+        return run_convert(args, *out);
     }
     o.output = *out;
     // Named as `serve DEM` names it, so the URLs of a static copy are the server's.
@@ -202,15 +279,7 @@ int run(const Args& args) {
 
     tiler::check_store_formats(o.output, o.formats); // a container holds one DEM encoding
 
-    // First SIGINT/SIGTERM: finish the tiles in flight and stop cleanly. The handler resets
-    // itself, so a second one stops at once (atomic writes keep the store valid even then).
-    struct sigaction action {};
-    action.sa_handler = on_signal;
-    action.sa_flags = SA_RESETHAND;
-    sigemptyset(&action.sa_mask);
-    sigaction(SIGINT, &action, nullptr);
-    sigaction(SIGTERM, &action, nullptr);
-
+    catch_stop_signals();
     const tiler::BuildSummary s = tiler::build_pyramid(o, g_stop);
     char seconds[32];
     std::snprintf(seconds, sizeof seconds, "%.1f", s.seconds);
@@ -244,8 +313,11 @@ int run(const Args& args) {
 const Command& build_command() {
     static const Command command{
         {"build",
-         "INPUT... -o OUT [options]",
-         "Pre-generate a tile pyramid into a directory or an SQLite file.",
+         "INPUT... -o OUT [options]\n       terrabound build STORE.sqlite -o "
+         "OUT.pmtiles|OUT.mbtiles "
+         "[--layer NAME] [--formats terrarium|mapbox] [--force]",
+         "Pre-generate a tile pyramid into a directory or a single file, or convert a store's "
+         "DEM tiles into a container.",
          {
              {"o",
               "OUT",
@@ -312,7 +384,13 @@ const Command& build_command() {
          "(or .drc); layer.json and {z}/{x}/{y}.terrain (gzip-compressed); terrain/tileset.json\n"
          "with its subtrees and glbs; dem/tilejson.json and dem/{z}/{x}/{y}.png (terrarium),\n"
          "dem/mapbox/... (mapbox); build-manifest.json. In a directory also OUT/_headers and\n"
-         "OUT/terrabound-nginx.conf: how a static host must send the files."},
+         "OUT/terrabound-nginx.conf: how a static host must send the files.\n"
+         "Converting: an INPUT ending in .sqlite or .db is a Terrabound SQLite store, whose\n"
+         "raster DEM tiles of one layer in one encoding are copied as they are (each checked\n"
+         "against its checksum) into OUT.mbtiles or OUT.pmtiles, with the metadata a build\n"
+         "straight into it writes. --layer and --formats choose when the store holds several\n"
+         "(an error lists what it holds); only a finished build is converted. OUT appears\n"
+         "whole or not at all (an interrupted conversion leaves nothing); --force replaces it."},
         run};
     return command;
 }
