@@ -55,7 +55,8 @@ int main(int argc, char** argv) {
         for (std::int64_t y = range.y0; y <= range.y1; ++y) {
             for (std::int64_t x = range.x0; x <= range.x1; ++x) {
                 auto t = Clock::now();
-                const std::vector<double> heights = tiler::dem_tile_heights(*layer, {z, x, y});
+                const std::vector<double> heights = tiler::dem_tile_heights(
+                    *layer, tiler::ValidTile::parse(tiler::Scheme::Mercator, {z, x, y}));
                 r.sample += seconds_since(t);
                 for (int f = 0; f < 2; ++f) {
                     t = Clock::now();

@@ -79,12 +79,13 @@ int main(int argc, char** argv) {
             for (std::int64_t x = range.x0; x <= range.x1; ++x) {
                 const tiler::TileId id{z, x, y};
                 auto t0 = Clock::now();
-                const std::string terrain = layer->make_tile(id, tiler::Format::Terrain);
+                const std::string terrain =
+                    layer->make_tile(layer->tile(id), tiler::Format::Terrain);
                 t_sum += std::chrono::duration<double>(Clock::now() - t0).count();
                 t0 = Clock::now();
                 std::string glb;
                 try {
-                    glb = layer->make_tile(id, tiler::Format::Glb);
+                    glb = layer->make_tile(layer->tile(id), tiler::Format::Glb);
                 } catch (const NotFound&) {
                 }
                 g_sum += std::chrono::duration<double>(Clock::now() - t0).count();

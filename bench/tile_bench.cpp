@@ -52,7 +52,7 @@ int main(int argc, char** argv) {
         for (std::int64_t y = range.y0; y <= range.y1; ++y) {
             for (std::int64_t x = range.x0; x <= range.x1; ++x) {
                 auto t = Clock::now();
-                const tiler::MeshedTile tile = layer->mesh_tile_at({z, x, y}, eps);
+                const tiler::MeshedTile tile = layer->mesh_tile_at(layer->tile({z, x, y}), eps);
                 r.read += seconds_since(t); // read and mesh
                 t = Clock::now();
                 tiler::EncodeReport report;

@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <limits>
 #include <sstream>
 
 namespace tb::cli {
@@ -28,19 +29,19 @@ int run(const Args& args) {
                          ": unknown output type; use .glb, .drc, .obj or .tif");
     }
     const std::size_t n = args.positional.size();
-    tiler::TileId id;
     const long long z = to_int(args.positional[n - 3], "tile: Z");
-    if (z < 0 || z > tiler::kMaxZoom) {
-        throw InputError("tile: Z " + args.positional[n - 3] + " is outside 0.." +
-                         std::to_string(tiler::kMaxZoom));
-    }
-    id.z = static_cast<int>(z);
-    id.x = to_int(args.positional[n - 2], "tile: X");
-    id.y = to_int(args.positional[n - 1], "tile: Y");
+    // Z clamped to what an int holds (any zoom past it is as far outside the scheme); the
+    // scheme's ranges are ValidTile::parse's to check.
+    constexpr long long kIntMin = std::numeric_limits<int>::min();
+    constexpr long long kIntMax = std::numeric_limits<int>::max();
+    const tiler::TileId id{static_cast<int>(std::clamp(z, kIntMin, kIntMax)),
+                           to_int(args.positional[n - 2], "tile: X"),
+                           to_int(args.positional[n - 1], "tile: Y")};
 
     tiler::LayerOptions options;
     options.sources.assign(args.positional.begin(), args.positional.end() - 3);
     options.scheme = tiler::parse_scheme(args.get("scheme").value_or("geodetic"));
+    const tiler::ValidTile tile = tiler::ValidTile::parse(options.scheme, id);
     const long long size = args.get_int("size", 256);
     if (size < 2 || size > 4096) {
         throw InputError("tile: --size " + std::to_string(size) + " is outside 2..4096");
@@ -58,20 +59,19 @@ int run(const Args& args) {
         options.valid_range = tiler::parse_valid_range(*v, "tile: --valid-range");
     }
     const auto layer = tiler::Layer::open(options);
-    const double eps = args.has("eps") ? args.get_double("eps", 0) : layer->eps_for_zoom(id.z);
+    const double eps = args.has("eps") ? args.get_double("eps", 0) : layer->eps_for_zoom(tile.z());
     tiler::check_eps(eps, "tile: --eps");
 
     std::ostringstream summary;
-    summary << "tile " << id.z << "/" << id.x << "/" << id.y << " (" << to_string(options.scheme)
-            << "): ";
+    summary << "tile " << tiler::tile_name(tile.id()) << " (" << to_string(options.scheme) << "): ";
     if (ext == "tif") {
-        const tiler::TileRaster raster = layer->mesh_tile_at(id, eps).raster;
+        const tiler::TileRaster raster = layer->mesh_tile_at(tile, eps).raster;
         tiler::write_tile_raster_tiff(raster, *out);
         const auto voids = std::count(raster.grid.valid.begin(), raster.grid.valid.end(), 0);
         summary << raster.grid.width << " x " << raster.grid.height << " samples, " << voids
                 << " void";
     } else if (ext == "obj") {
-        const tiler::MeshedTile t = layer->mesh_tile_at(id, eps);
+        const tiler::MeshedTile t = layer->mesh_tile_at(tile, eps);
         std::string text;
         char line[128];
         for (std::size_t v = 0; v < t.mesh.vertex_count(); ++v) {
@@ -99,7 +99,7 @@ int run(const Args& args) {
                 << " triangles, eps " << eps << " m (mesh " << t.budget.mesh_eps << " m)";
     } else {
         const auto format = *tiler::parse_format(ext);
-        const std::string bytes = layer->make_tile_at(id, format, eps);
+        const std::string bytes = layer->make_tile_at(tile, format, eps);
         tiler::write_file_atomically(*out, bytes);
         summary << bytes.size() << " bytes, eps " << eps << " m";
     }

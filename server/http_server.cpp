@@ -978,8 +978,10 @@ struct HttpServer::Impl {
         const auto start = std::chrono::steady_clock::now();
         QuickRequest q;
         std::int64_t z = 0, x = 0, y = 0;
+        // An id outside the scheme is never cached (TileService::tile parses it first): it
+        // misses here and the route answers 400.
         if (!parse_quick(request, q) || !parse_index(q.z, 2, z) || !parse_index(q.x, 10, x) ||
-            !parse_index(q.y, 10, y) || z > tiler::kMaxZoom) {
+            !parse_index(q.y, 10, y)) {
             return false;
         }
         const tiler::TileId id{static_cast<int>(z), x, y};
@@ -1587,7 +1589,7 @@ struct HttpServer::Impl {
     void serve_dem_tile(const httplib::Request& req, httplib::Response& res) {
         std::int64_t z = 0, x = 0, y = 0;
         if (!parse_index(req.matches[2].str(), 2, z) || !parse_index(req.matches[3].str(), 10, x) ||
-            !parse_index(req.matches[4].str(), 10, y) || z > tiler::kMaxZoom) {
+            !parse_index(req.matches[4].str(), 10, y)) {
             throw InputError("DEM tile coordinates must be /dem/{z}/{x}/{y}.png with "
                              "non-negative integers (z up to " +
                              std::to_string(tiler::kMaxZoom) + ")");
@@ -1606,7 +1608,7 @@ struct HttpServer::Impl {
     void serve_terrain(const httplib::Request& req, httplib::Response& res) {
         std::int64_t z = 0, x = 0, y = 0;
         if (!parse_index(req.matches[2].str(), 2, z) || !parse_index(req.matches[3].str(), 10, x) ||
-            !parse_index(req.matches[4].str(), 10, y) || z > tiler::kMaxZoom) {
+            !parse_index(req.matches[4].str(), 10, y)) {
             throw InputError("terrain tile coordinates must be /{z}/{x}/{y}.terrain with "
                              "non-negative integers (z up to " +
                              std::to_string(tiler::kMaxZoom) + ")");
@@ -1627,18 +1629,18 @@ struct HttpServer::Impl {
 
     void serve_terrain3d(const httplib::Request& req, httplib::Response& res) {
         std::int64_t root = 0, level = 0, x = 0, y = 0;
-        tiler::TileId id;
+        std::optional<tiler::ValidTile> tile;
         if (!parse_index(req.matches[2].str(), 1, root) ||
             !parse_index(req.matches[3].str(), 2, level) ||
             !parse_index(req.matches[4].str(), 10, x) ||
-            !parse_index(req.matches[5].str(), 10, y) || level > tiler::kMaxZoom ||
-            !tiler::terrain_tile_id(static_cast<int>(root), static_cast<int>(level), x, y, id)) {
+            !parse_index(req.matches[5].str(), 10, y) ||
+            !(tile = tiler::terrain_tile_id(root, level, x, y))) {
             throw InputError("3D Tiles terrain tile coordinates must be "
                              "/terrain/{root}/{level}/{x}/{y}.glb with root 0 or 1, level up to " +
                              std::to_string(tiler::kMaxZoom) + ", and x, y below 2^level");
         }
         const auto blob =
-            tiles.tile(req.matches[1].str(), id, tiler::Format::Terrain3d, eps_param(req));
+            tiles.tile(req.matches[1].str(), tile->id(), tiler::Format::Terrain3d, eps_param(req));
         if (busy(blob, res)) {
             return;
         }
@@ -1658,10 +1660,6 @@ struct HttpServer::Impl {
             throw InputError("tile coordinates must be /{z}/{x}/{y} with non-negative integers "
                              "(z up to " +
                              std::to_string(tiler::kMaxZoom) + ")");
-        }
-        if (z > tiler::kMaxZoom) {
-            throw InputError("zoom " + std::to_string(z) + " is beyond the largest supported, " +
-                             std::to_string(tiler::kMaxZoom));
         }
         const tiler::Format format =
             req.matches[5].str() == "glb" ? tiler::Format::Glb : tiler::Format::Drc;

@@ -279,7 +279,7 @@ struct Flight {
 struct TileRequest {
     std::shared_ptr<const ServedLayer> served; // as the request found it: one layer throughout
     std::string layer;
-    tiler::TileId id;
+    tiler::ValidTile tile; // in the format's pyramid (check_tile)
     tiler::Format format;
     tiler::EpsChoice eps;
     std::string key; // the memory cache's
@@ -289,7 +289,7 @@ struct TileRequest {
         return served->store && (eps.level < 0 || served->store_eps_levels) &&
                (format != tiler::Format::Terrain || served->store_terrain);
     }
-    tiler::TileKey store_key() const { return {layer, id, format, eps.level}; }
+    tiler::TileKey store_key() const { return {layer, tile.id(), format, eps.level}; }
 };
 
 } // namespace
@@ -561,8 +561,8 @@ TileService::Impl::make(const TileRequest& r, const Job& job, std::exception_ptr
     const tiler::CancelFn cancelled = [&job] { return job.cancelled.load(); };
     try {
         auto made = make_blob(tiler::is_dem_format(r.format)
-                                  ? tiler::make_dem_tile(layer, r.id, r.format)
-                                  : layer.make_tile(r.id, r.format, r.eps, cancelled));
+                                  ? tiler::make_dem_tile(layer, r.tile, r.format)
+                                  : layer.make_tile(r.tile, r.format, r.eps, cancelled));
         ++metrics.tiles_generated;
         return made;
     } catch (const tiler::Cancelled& e) {
@@ -660,62 +660,44 @@ void check_eps(const tiler::Layer& layer, tiler::Format format, tiler::EpsChoice
     }
 }
 
-// The checks before a mesh tile is looked up: InputError for an id outside the layer's scheme,
-// NotFound outside its zooms or data.
-void check_mesh_tile(const tiler::Layer& layer, const tiler::TileId& id) {
-    if (!tiler::is_valid(layer.options().scheme, id)) {
-        throw InputError("tile " + std::to_string(id.z) + "/" + std::to_string(id.x) + "/" +
-                         std::to_string(id.y) + " is outside the " +
-                         tiler::to_string(layer.options().scheme) + " tiling scheme");
-    }
-    const std::string where =
-        std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
-    if (id.z < layer.min_zoom() || id.z > layer.max_zoom() || !layer.may_have_tile(id)) {
-        throw NotFound("layer '" + layer.options().name + "' has no tile " + where + " (zooms " +
-                       std::to_string(layer.min_zoom()) + ".." + std::to_string(layer.max_zoom()) +
-                       ")");
+// The checks before a mesh tile is looked up: NotFound outside the layer's zooms or data.
+void check_mesh_tile(const tiler::Layer& layer, const tiler::ValidTile& tile) {
+    if (tile.z() < layer.min_zoom() || tile.z() > layer.max_zoom() || !layer.may_have_tile(tile)) {
+        throw NotFound("layer '" + layer.options().name + "' has no tile " +
+                       tiler::tile_name(tile.id()) + " (zooms " + std::to_string(layer.min_zoom()) +
+                       ".." + std::to_string(layer.max_zoom()) + ")");
     }
 }
 
 // The same for a quantized-mesh tile, which every zoom up to max_zoom has (filler where the
 // layer has no data).
-void check_terrain_tile(const tiler::Layer& layer, const tiler::TileId& id) {
-    const std::string where =
-        std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
-    if (!tiler::is_valid(tiler::Scheme::Geodetic, id)) {
-        throw InputError("terrain tile " + where +
-                         " is outside the geodetic TMS (x below 2^(z+1), y below 2^z)");
-    }
-    if (id.z > layer.max_zoom()) {
-        throw NotFound("layer '" + layer.options().name + "' has no terrain tile " + where +
-                       " (max zoom " + std::to_string(layer.max_zoom()) +
-                       "; clients upsample its parent)");
+void check_terrain_tile(const tiler::Layer& layer, const tiler::ValidTile& tile) {
+    if (tile.z() > layer.max_zoom()) {
+        throw NotFound("layer '" + layer.options().name + "' has no terrain tile " +
+                       tiler::tile_name(tile.id()) + " (max zoom " +
+                       std::to_string(layer.max_zoom()) + "; clients upsample its parent)");
     }
 }
 
-// The same for a raster DEM tile, whose pyramid is EPSG:3857 XYZ whatever the layer's scheme.
-void check_dem_tile(const tiler::Layer& layer, const tiler::TileId& id) {
-    const std::string where =
-        std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
-    if (!tiler::is_valid(tiler::Scheme::Mercator, id)) {
-        throw InputError("DEM tile " + where +
-                         " is outside EPSG:3857 XYZ (x and y below 2^z at zoom z)");
-    }
-    const tiler::TileRange r = tiler::dem_tiles_at(layer, id.z);
-    if (r.empty() || id.x < r.x0 || id.x > r.x1 || id.y < r.y0 || id.y > r.y1) {
+// The same for a raster DEM tile.
+void check_dem_tile(const tiler::Layer& layer, const tiler::ValidTile& tile) {
+    const tiler::TileRange r = tiler::dem_tiles_at(layer, tile.z());
+    if (r.empty() || tile.x() < r.x0 || tile.x() > r.x1 || tile.y() < r.y0 || tile.y() > r.y1) {
         const tiler::DemTilePlan plan = tiler::dem_tile_plan(layer);
-        throw NotFound("layer '" + layer.options().name + "' has no DEM tile " + where +
-                       " (DEM zooms " + std::to_string(plan.min_zoom) + ".." +
-                       std::to_string(plan.max_zoom) + ")");
+        throw NotFound("layer '" + layer.options().name + "' has no DEM tile " +
+                       tiler::tile_name(tile.id()) + " (DEM zooms " +
+                       std::to_string(plan.min_zoom) + ".." + std::to_string(plan.max_zoom) + ")");
     }
 }
 
 // The checks of a tile request, before any lookup: NotFound for a format the layer does not
-// serve, then check_eps and the id's checks for the format's pyramid.
-void check_tile(const ServedLayer& served,
-                const tiler::TileId& id,
-                tiler::Format format,
-                tiler::EpsChoice eps) {
+// serve, then check_eps, then the id parsed as a tile of the format's pyramid (InputError
+// outside it): EPSG:3857 XYZ for a raster DEM tile whatever the layer's scheme, the layer's
+// scheme otherwise; then that pyramid's checks. Returns the tile.
+tiler::ValidTile check_tile(const ServedLayer& served,
+                            const tiler::TileId& id,
+                            tiler::Format format,
+                            tiler::EpsChoice eps) {
     const tiler::Layer& layer = *served.layer;
     if (std::find(served.formats.begin(), served.formats.end(), format) == served.formats.end()) {
         throw NotFound("layer '" + layer.options().name + "' does not serve ." +
@@ -723,12 +705,17 @@ void check_tile(const ServedLayer& served,
     }
     check_eps(layer, format, eps);
     if (tiler::is_dem_format(format)) {
-        check_dem_tile(layer, id);
-    } else if (tiler::is_terrain_format(format)) {
-        check_terrain_tile(layer, id);
-    } else {
-        check_mesh_tile(layer, id);
+        const tiler::ValidTile tile = tiler::ValidTile::parse(tiler::Scheme::Mercator, id);
+        check_dem_tile(layer, tile);
+        return tile;
     }
+    const tiler::ValidTile tile = layer.tile(id);
+    if (tiler::is_terrain_format(format)) {
+        check_terrain_tile(layer, tile);
+    } else {
+        check_mesh_tile(layer, tile);
+    }
+    return tile;
 }
 
 } // namespace
@@ -740,9 +727,13 @@ std::shared_ptr<const Blob> TileService::tile(const std::string& layer_name,
     Impl& s = *impl_;
     const auto deadline = Clock::now() + s.options.deadline;
     const std::shared_ptr<const ServedLayer> served = require(layer_name);
-    check_tile(*served, id, format, eps);
-    const TileRequest r{
-        served, layer_name, id, format, eps, tile_key(layer_name, id, format, eps.level), deadline};
+    const TileRequest r{served,
+                        layer_name,
+                        check_tile(*served, id, format, eps),
+                        format,
+                        eps,
+                        tile_key(layer_name, id, format, eps.level),
+                        deadline};
     std::shared_ptr<const Blob> blob = s.cache.get(r.key);
     if (blob) {
         ++s.metrics.cache_hits;

@@ -144,8 +144,10 @@ public:
     // generation could not start within options.start_wait (503 after that wait), or when the
     // tile was not ready by options.deadline after the call (503 then). Throws
     // NotFound for an unknown layer, a format the layer does not serve, or a tile with no data;
-    // InputError for an id outside the scheme, an eps level the layer does not have (the same
-    // message for every format), or an eps level asked of a format other than glb and drc.
+    // InputError for an id outside the format's pyramid (the id is parsed into a ValidTile
+    // here, where the layer and so its scheme are known: EPSG:3857 XYZ for raster DEM tiles,
+    // the layer's scheme otherwise), an eps level the layer does not have (the same message for
+    // every format), or an eps level asked of a format other than glb and drc.
     std::shared_ptr<const Blob> tile(const std::string& layer,
                                      const tiler::TileId& id,
                                      tiler::Format format,

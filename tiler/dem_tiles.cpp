@@ -18,10 +18,6 @@ namespace {
 // EPSG:3857's latitude limit, atan(sinh(pi)).
 constexpr double kMercatorLat = 85.05112877980659;
 
-std::string tile_name(const TileId& id) {
-    return std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
-}
-
 bool in_range(const TileRange& r, const TileId& id) {
     return !r.empty() && id.x >= r.x0 && id.x <= r.x1 && id.y >= r.y0 && id.y <= r.y1;
 }
@@ -134,12 +130,10 @@ TileRange dem_tiles_at(const Layer& layer, int z) {
     return tiles_covering(Scheme::Mercator, plan.bounds, z);
 }
 
-std::vector<double> dem_tile_heights(const Layer& layer, const TileId& id) {
+std::vector<double> dem_tile_heights(const Layer& layer, const ValidTile& tile) {
+    TB_ASSERT(tile.scheme() == Scheme::Mercator);
+    const TileId& id = tile.id();
     const LayerOptions& o = layer.options();
-    if (!is_valid(Scheme::Mercator, id)) {
-        throw InputError("DEM tile " + tile_name(id) + ": outside EPSG:3857 XYZ (z 0.." +
-                         std::to_string(kMaxZoom) + ", x and y below 2^z)");
-    }
     const DemTilePlan plan = dem_tile_plan(layer);
     if (!in_range(dem_tiles_at(layer, id.z), id)) {
         throw NotFound("DEM tile " + tile_name(id) + ": layer '" + o.name +
@@ -208,9 +202,9 @@ std::vector<double> dem_tile_heights(const Layer& layer, const TileId& id) {
     return out;
 }
 
-std::string make_dem_tile(const Layer& layer, const TileId& id, Format format) {
+std::string make_dem_tile(const Layer& layer, const ValidTile& tile, Format format) {
     TB_ASSERT(is_dem_format(format));
-    const std::vector<double> heights = dem_tile_heights(layer, id);
+    const std::vector<double> heights = dem_tile_heights(layer, tile);
     const int p = layer.options().dem_tile_size;
     return encode_dem_png(heights, p, p, format);
 }

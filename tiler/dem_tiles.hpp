@@ -38,11 +38,12 @@ DemTilePlan dem_tile_plan(const Layer& layer);
 // Tiles of zoom z that may hold data: empty outside min_zoom..max_zoom.
 TileRange dem_tiles_at(const Layer& layer, int z);
 
-// The P x P heights of a DEM tile (row 0 at the north), metres, before encoding. Throws
-// InputError for an id outside EPSG:3857 XYZ, NotFound beyond the zooms or the data.
-std::vector<double> dem_tile_heights(const Layer& layer, const TileId& id);
+// The P x P heights of a DEM tile (row 0 at the north), metres, before encoding. The tile is
+// a mercator one (asserted; ValidTile::parse(Scheme::Mercator, id) where a request names it),
+// whatever the layer's scheme. Throws NotFound beyond the zooms or the data.
+std::vector<double> dem_tile_heights(const Layer& layer, const ValidTile& tile);
 // The tile as PNG in `format` (Terrarium or Mapbox). Same errors as dem_tile_heights.
-std::string make_dem_tile(const Layer& layer, const TileId& id, Format format);
+std::string make_dem_tile(const Layer& layer, const ValidTile& tile, Format format);
 
 DemHeights parse_dem_heights(const std::string& name); // "sea_level" | "ellipsoid"
 const char* to_string(DemHeights heights);

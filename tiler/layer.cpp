@@ -29,10 +29,6 @@
 namespace tb::tiler {
 namespace {
 
-std::string tile_name(const TileId& id) {
-    return std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
-}
-
 void validate_options(const LayerOptions& o) {
     if (o.name.empty() || !std::all_of(o.name.begin(), o.name.end(), [](char c) {
             return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-';
@@ -117,7 +113,9 @@ public:
               options_,
               plan_,
               *source_,
-              [this](const TileId& id, double eps) { return mesh_at(id, eps, false, false); },
+              [this](const ValidTile& tile, double eps) {
+                  return mesh_at(tile, eps, false, false);
+              },
               [this] {
                   std::lock_guard lock(measured_mutex_);
                   ++over_eps_;
@@ -130,7 +128,7 @@ public:
     double terrain_eps_for_zoom(int z) const override { return plan_.terrain_eps_for_zoom(z); }
     LonLatBox data_bounds() const override { return plan_.footprint(); }
     TileRange tiles_at(int z) const override { return plan_.tiles_at(z); }
-    bool may_have_tile(const TileId& id) const override { return plan_.may_have_tile(id); }
+    bool may_have_tile(const ValidTile& tile) const override { return plan_.may_have_tile(tile); }
     ZoomSource zoom_source(int z) const override { return plan_.zoom_source(z); }
 
     bool document(const std::string& path, std::string& out) const override {
@@ -144,9 +142,9 @@ public:
         spec.max_height = plan_.max_height();
         spec.eps_for_zoom = [this](int z) { return eps_for_zoom(z); };
         spec.tile_size = options_.tile_size;
-        spec.has_tile = [this](const TileId& id) { return may_have_tile(id); };
+        spec.has_tile = [this](const ValidTile& tile) { return may_have_tile(tile); };
         spec.budget_for_zoom = [this](int z) { return plan_.budget_at(z, eps_for_zoom(z)); };
-        spec.error_for_tile = [this](const TileId& id) { return tile_error(id); };
+        spec.error_for_tile = [this](const ValidTile& tile) { return tile_error(tile); };
         if (path == "layer.json") {
             if (options_.scheme != Scheme::Geodetic) {
                 return false;
@@ -160,7 +158,7 @@ public:
         return tileset_document(spec, path, out);
     }
 
-    std::string make_tile(const TileId& id,
+    std::string make_tile(const ValidTile& tile,
                           Format format,
                           EpsChoice eps,
                           const CancelFn& cancelled) const override {
@@ -171,14 +169,14 @@ public:
                                  "': globe terrain tiles have only their zoom's eps "
                                  "(CesiumJS picks levels itself); drop ?eps");
             }
-            TerrainDraft draft = terrain_.draft(id);
-            checkpoint(id, "encoding");
-            return terrain_.encode(draft, id, format);
+            TerrainDraft draft = terrain_.draft(tile);
+            checkpoint(tile.id(), "encoding");
+            return terrain_.encode(draft, tile, format);
         }
         double value = 0;
         if (eps.level < 0) {
-            plan_.check_id(id);
-            value = eps_for_zoom(id.z);
+            plan_.check_data(tile);
+            value = eps_for_zoom(tile.z());
         } else if (static_cast<std::size_t>(eps.level) < options_.eps_levels.size()) {
             value = options_.eps_levels[static_cast<std::size_t>(eps.level)];
         } else {
@@ -186,11 +184,11 @@ public:
                              std::to_string(eps.level) + " does not exist (the layer has " +
                              std::to_string(options_.eps_levels.size()) + ")");
         }
-        return make_tile_at(id, format, value);
+        return make_tile_at(tile, format, value);
     }
 
     std::vector<std::pair<Format, std::string>>
-    make_tiles(const TileId& id, std::span<const Format> formats) const override {
+    make_tiles(const ValidTile& tile, std::span<const Format> formats) const override {
         for (const Format format : formats) {
             if (is_dem_format(format)) {
                 throw InputError(std::string("make_tiles: ") + format_name(format) +
@@ -209,17 +207,18 @@ public:
                 }
                 if (!meshed) {
                     try {
-                        plan_.check_id(id); // before eps_for_zoom: its message names the id
-                        meshed = mesh_to_encode(id, eps_for_zoom(id.z));
+                        plan_.check_data(tile); // before eps_for_zoom: its message names the tile
+                        meshed = mesh_to_encode(tile, eps_for_zoom(tile.z()));
                     } catch (const NotFound&) {
                         break; // no data here: no glb, no drc
                     }
                     if (meshed->mesh.triangle_count() > 0) {
-                        normals = normals_of(*meshed, id);
+                        normals = normals_of(*meshed, tile);
                     }
                 }
                 try {
-                    made[k] = encode_meshed(*meshed, normals, id, formats[k], eps_for_zoom(id.z));
+                    made[k] =
+                        encode_meshed(*meshed, normals, tile, formats[k], eps_for_zoom(tile.z()));
                 } catch (const NotFound&) {
                     // nothing this format can carry (a .drc of voids only)
                 }
@@ -232,13 +231,13 @@ public:
             }
             if (!draft) {
                 try {
-                    draft = terrain_.draft(id);
+                    draft = terrain_.draft(tile);
                 } catch (const NotFound&) {
                     break; // beyond the layer's max zoom: no terrain tile
                 }
             }
             try {
-                made[k] = terrain_.encode(*draft, id, formats[k]);
+                made[k] = terrain_.encode(*draft, tile, formats[k]);
             } catch (const NotFound&) {
                 // nothing this format can carry
             }
@@ -252,41 +251,42 @@ public:
         return out;
     }
 
-    TileRaster make_raster(const TileId& id) const override;
+    TileRaster make_raster(const ValidTile& tile) const override;
     // The zoom's lattice sampled from the source (DemSource::sample), or read off the summary;
     // either as a tile raster (lattice_tile_raster: the datum applied, voids filled).
-    TileRaster lattice_raster(const TileId& id) const;
-    TileRaster summary_raster(const TileId& id) const;
+    TileRaster lattice_raster(const ValidTile& tile) const;
+    TileRaster summary_raster(const ValidTile& tile) const;
 
-    std::string make_tile_at(const TileId& id, Format format, double eps) const override {
+    std::string make_tile_at(const ValidTile& tile, Format format, double eps) const override {
         if (is_terrain_format(format)) {
-            throw InputError("tile " + tile_name(id) +
+            throw InputError("tile " + tile_name(tile.id()) +
                              ": globe terrain tiles are made at their zoom's eps only");
         }
-        return encode_at(id, format, eps, true);
+        return encode_at(tile, format, eps, true);
     }
 
     // make_tile_at; without `with_normals` the tile carries no normals (tile_error only
     // measures, and the normals would cost another read of the source).
-    std::string encode_at(const TileId& id, Format format, double eps, bool with_normals) const {
-        const MeshedTile t = mesh_to_encode(id, eps);
-        checkpoint(id, "encoding");
+    std::string
+    encode_at(const ValidTile& tile, Format format, double eps, bool with_normals) const {
+        const MeshedTile t = mesh_to_encode(tile, eps);
+        checkpoint(tile.id(), "encoding");
         // Shading normals, the same function of position as the terrain tiles' (encode_tile
         // neither adds nor reorders vertices, so they stay aligned with the mesh it gives
         // Draco; a client decodes the vertices in Draco's own order, each with its normal),
         // made by encode_tile when it needs them: beside the lattice, when it has two threads.
         NormalsFn make_normals;
         if (with_normals && t.mesh.triangle_count() > 0) {
-            make_normals = [&] { return normals_of(t, id); };
+            make_normals = [&] { return normals_of(t, tile); };
         }
-        return encode_meshed(t, {}, id, format, eps, make_normals);
+        return encode_meshed(t, {}, tile, format, eps, make_normals);
     }
 
     // A meshed tile encoded as glb or drc, with `normals` (none when empty, unless
     // make_normals makes them).
     std::string encode_meshed(const MeshedTile& t,
                               const std::vector<std::array<double, 3>>& normals,
-                              const TileId& id,
+                              const ValidTile& tile,
                               Format format,
                               double eps,
                               const NormalsFn& make_normals = {}) const {
@@ -301,20 +301,20 @@ public:
                                         options_.mesh_threads,
                                         make_normals,
                                         t.cells);
-        if (zoom_source(id.z) != ZoomSource::Pixels) {
-            note_measured(id, eps, report);
+        if (zoom_source(tile.z()) != ZoomSource::Pixels) {
+            note_measured(tile, eps, report);
         }
         return bytes;
     }
 
-    MeshedTile mesh_tile_at(const TileId& id, double eps) const override {
-        return mesh_at(id, eps, true, true);
+    MeshedTile mesh_tile_at(const ValidTile& tile, double eps) const override {
+        return mesh_at(tile, eps, true, true);
     }
 
     // mesh_tile_at for an encoder, which measures the drawn tile at every valid sample: core
     // skips its own measure of the exact mesh (core::TriangulateOptions::check_error).
-    MeshedTile mesh_to_encode(const TileId& id, double eps) const {
-        return mesh_at(id, eps, true, false);
+    MeshedTile mesh_to_encode(const ValidTile& tile, double eps) const {
+        return mesh_at(tile, eps, true, false);
     }
 
     // mesh_tile_at, or with drop_voids false the globe terrain's mesh, which draws the voids
@@ -322,21 +322,22 @@ public:
     // span steep triangles whose every small move, as quantization makes, shifts the valid
     // samples beside them), at the terrain's budget. The raster's valid mask is kept: the
     // promise holds at the valid samples. `check_error`: see core::TriangulateOptions.
-    MeshedTile mesh_at(const TileId& id, double eps, bool drop_voids, bool check_error) const {
+    MeshedTile mesh_at(const ValidTile& tile, double eps, bool drop_voids, bool check_error) const {
         check_eps(eps, "eps");
         if (drop_voids) {
-            plan_.check_id(id);
+            plan_.check_data(tile);
         } else {
-            plan_.check_terrain_id(id);
+            plan_.check_terrain_data(tile);
         }
         MeshedTile t;
-        t.budget = drop_voids ? plan_.budget_at(id.z, eps) : plan_.terrain_budget_at(id.z, eps);
-        const ZoomSource from = zoom_source(id.z);
-        checkpoint(id, "reading its raster");
+        t.budget =
+            drop_voids ? plan_.budget_at(tile.z(), eps) : plan_.terrain_budget_at(tile.z(), eps);
+        const ZoomSource from = zoom_source(tile.z());
+        checkpoint(tile.id(), "reading its raster");
         if (from == ZoomSource::Pixels) {
-            PixelTile pixel =
-                make_pixel_tile(*source_, *plan_.pixels(), options_.scheme, id, plan_.datum());
-            checkpoint(id, "meshing");
+            PixelTile pixel = make_pixel_tile(
+                *source_, *plan_.pixels(), options_.scheme, tile.id(), plan_.datum());
+            checkpoint(tile.id(), "meshing");
             std::vector<std::uint8_t> valid;
             if (!drop_voids) {
                 valid = fill_for_terrain(pixel);
@@ -349,8 +350,8 @@ public:
             }
             return t;
         }
-        t.raster = from == ZoomSource::Summary ? summary_raster(id) : lattice_raster(id);
-        checkpoint(id, "meshing");
+        t.raster = from == ZoomSource::Summary ? summary_raster(tile) : lattice_raster(tile);
+        checkpoint(tile.id(), "meshing");
         if (drop_voids) {
             t.mesh = to_tile_mesh(
                 t.raster,
@@ -367,7 +368,7 @@ public:
         if (from == ZoomSource::Summary) {
             // Every block of the summary under the tile, as the drawn tile must hold it.
             const int level = summary_level(
-                plan_.summary(), *plan_.pixels(), options_.scheme, id.z, options_.tile_size);
+                plan_.summary(), *plan_.pixels(), options_.scheme, tile.z(), options_.tile_size);
             t.cells = summary_cells(plan_.summary(), *plan_.pixels(), t.raster, level);
             return t;
         }
@@ -387,24 +388,25 @@ public:
         return plan_.pixels() ? Guarantee::SourcePixels : Guarantee::Measured;
     }
 
-    double tile_error(const TileId& id) const override {
-        const double eps = eps_for_zoom(id.z);
-        if (zoom_source(id.z) == ZoomSource::Pixels) {
-            return plan_.budget_at(id.z, eps).drawn_bound;
+    double tile_error(const ValidTile& tile) const override {
+        TB_ASSERT(tile.scheme() == options_.scheme);
+        const double eps = eps_for_zoom(tile.z());
+        if (zoom_source(tile.z()) == ZoomSource::Pixels) {
+            return plan_.budget_at(tile.z(), eps).drawn_bound;
         }
         {
             std::lock_guard lock(measured_mutex_);
-            if (const auto it = measured_.find(id); it != measured_.end()) {
+            if (const auto it = measured_.find(tile.id()); it != measured_.end()) {
                 return it->second;
             }
         }
         try {
-            encode_at(id, Format::Glb, eps, false); // measures and records it
+            encode_at(tile, Format::Glb, eps, false); // measures and records it
         } catch (const NotFound&) {
-            return plan_.budget_at(id.z, eps).drawn_bound;
+            return plan_.budget_at(tile.z(), eps).drawn_bound;
         }
         std::lock_guard lock(measured_mutex_);
-        return measured_.at(id);
+        return measured_.at(tile.id());
     }
 
     std::size_t tiles_over_eps() const override {
@@ -446,10 +448,11 @@ public:
 
 private:
     // The tile's vertex normals (tiler/mesh/vertex_normals.hpp).
-    std::vector<std::array<double, 3>> normals_of(const MeshedTile& t, const TileId& id) const {
-        const bool pixels = zoom_source(id.z) == ZoomSource::Pixels;
+    std::vector<std::array<double, 3>> normals_of(const MeshedTile& t,
+                                                  const ValidTile& tile) const {
+        const bool pixels = zoom_source(tile.z()) == ZoomSource::Pixels;
         return vertex_normals(t.mesh,
-                              id,
+                              tile.id(),
                               options_.scheme,
                               options_.tile_size,
                               *source_,
@@ -458,21 +461,22 @@ private:
 
     // Records a measured tile's published error (tiles at the ladder's eps only: that is the
     // number its tileset carries), counting and logging those above eps.
-    void note_measured(const TileId& id, double eps, const EncodeReport& report) const {
-        if (eps != eps_for_zoom(id.z)) {
+    void note_measured(const ValidTile& tile, double eps, const EncodeReport& report) const {
+        if (eps != eps_for_zoom(tile.z())) {
             return;
         }
         std::lock_guard lock(measured_mutex_);
-        const auto [it, fresh] = measured_.emplace(id, report.published);
+        const auto [it, fresh] = measured_.emplace(tile.id(), report.published);
         if (fresh && report.published > eps) {
             ++over_eps_;
-            log::debug("tile " + tile_name(id) + ": measured against the source's pixels, its " +
-                       "error is " + std::to_string(report.published) +
-                       " m, above the zoom's eps " + std::to_string(eps) +
-                       " m; the tileset publishes the measured bound");
+            log::debug("tile " + tile_name(tile.id()) +
+                       ": measured against the source's pixels, its " + "error is " +
+                       std::to_string(report.published) + " m, above the zoom's eps " +
+                       std::to_string(eps) + " m; the tileset publishes the measured bound");
         }
         if (fresh && report.points_outside > 0) {
-            log::debug("tile " + tile_name(id) + ": " + std::to_string(report.points_outside) +
+            log::debug("tile " + tile_name(tile.id()) + ": " +
+                       std::to_string(report.points_outside) +
                        " valid source pixel(s) lie where the tile draws nothing (next to voids)");
         }
     }
@@ -486,32 +490,34 @@ private:
     mutable std::size_t over_eps_ = 0;
 };
 
-TileRaster DemLayer::make_raster(const TileId& id) const {
-    plan_.check_id(id);
-    return zoom_source(id.z) == ZoomSource::Summary ? summary_raster(id) : lattice_raster(id);
+TileRaster DemLayer::make_raster(const ValidTile& tile) const {
+    plan_.check_data(tile);
+    return zoom_source(tile.z()) == ZoomSource::Summary ? summary_raster(tile)
+                                                        : lattice_raster(tile);
 }
 
-TileRaster DemLayer::lattice_raster(const TileId& id) const {
+TileRaster DemLayer::lattice_raster(const ValidTile& tile) const {
     const Scheme scheme = options_.scheme;
     const int n = options_.tile_size;
     const int w = n + 1 + 2 * kLatticeFillMargin;
-    const std::int64_t c0 = tile_first_column(scheme, id, n) - kLatticeFillMargin;
-    const std::int64_t r0 = tile_first_row(scheme, id, n) - kLatticeFillMargin;
+    const std::int64_t c0 = tile_first_column(scheme, tile.id(), n) - kLatticeFillMargin;
+    const std::int64_t r0 = tile_first_row(scheme, tile.id(), n) - kLatticeFillMargin;
     return lattice_tile_raster(
-        id, source_->sample(scheme, id.z, n, c0, r0, w, w), scheme, n, plan_.datum());
+        tile.id(), source_->sample(scheme, tile.z(), n, c0, r0, w, w), scheme, n, plan_.datum());
 }
 
-TileRaster DemLayer::summary_raster(const TileId& id) const {
+TileRaster DemLayer::summary_raster(const ValidTile& tile) const {
     const Scheme scheme = options_.scheme;
     const int n = options_.tile_size;
     const int w = n + 1 + 2 * kLatticeFillMargin;
-    const std::int64_t c0 = tile_first_column(scheme, id, n) - kLatticeFillMargin;
-    const std::int64_t r0 = tile_first_row(scheme, id, n) - kLatticeFillMargin;
+    const std::int64_t c0 = tile_first_column(scheme, tile.id(), n) - kLatticeFillMargin;
+    const std::int64_t r0 = tile_first_row(scheme, tile.id(), n) - kLatticeFillMargin;
     const DemSummary& sum = plan_.summary();
-    const int level = summary_level(sum, *plan_.pixels(), scheme, id.z, n);
+    const int level = summary_level(sum, *plan_.pixels(), scheme, tile.z(), n);
     return lattice_tile_raster(
-        id,
-        summary_lattice(sum, *plan_.pixels(), plan_.datum(), scheme, id.z, n, level, c0, r0, w, w),
+        tile.id(),
+        summary_lattice(
+            sum, *plan_.pixels(), plan_.datum(), scheme, tile.z(), n, level, c0, r0, w, w),
         scheme,
         n,
         plan_.datum());

@@ -134,39 +134,45 @@ public:
     virtual double terrain_eps_for_zoom(int z) const = 0;
     virtual LonLatBox data_bounds() const = 0;   // the sources' extent in lon/lat
     virtual TileRange tiles_at(int z) const = 0; // tiles of zoom z that may hold data
-    virtual bool may_have_tile(const TileId& id) const = 0;
+    // Whether a tile of the layer's scheme lies in tiles_at of its zoom.
+    virtual bool may_have_tile(const ValidTile& tile) const = 0;
+    // The id as a tile of the layer's scheme (ValidTile::parse: InputError outside it).
+    ValidTile tile(const TileId& id) const { return ValidTile::parse(options().scheme, id); }
 
     // The layer's tileset documents by relative path: "tileset.json" (3D Tiles 1.1; content URIs
     // are relative: "{z}/{x}/{y}.glb" next to it) and any external tileset or subtree it refers
     // to. Returns false when the path names no document.
     virtual bool document(const std::string& path, std::string& out) const = 0;
 
-    // The encoded tile. Throws InputError for an id outside the scheme or an unknown eps level,
-    // NotFound when the tile holds no data, Cancelled when `cancelled` returns true at one of
-    // its checkpoints. Safe to call from many threads at once.
-    virtual std::string make_tile(const TileId& id,
+    // Every function below that takes a ValidTile takes one of the layer's scheme (asserted):
+    // a tile of another scheme is the caller's bug, not the request's.
+
+    // The encoded tile. Throws InputError for an unknown eps level, NotFound when the tile
+    // holds no data, Cancelled when `cancelled` returns true at one of its checkpoints. Safe to
+    // call from many threads at once.
+    virtual std::string make_tile(const ValidTile& tile,
                                   Format format,
                                   EpsChoice eps = {},
                                   const CancelFn& cancelled = {}) const = 0;
     // The tile in each of `formats` (mesh and terrain formats, at the zoom's eps), in that
     // order: for each, the bytes make_tile(id, format) gives, with each mesh made once (glb and
     // drc share one, terrain and terrain3d another). A format make_tile would answer NotFound
-    // for is left out. InputError for a DEM format or an id outside the scheme.
+    // for is left out. InputError for a DEM format.
     virtual std::vector<std::pair<Format, std::string>>
-    make_tiles(const TileId& id, std::span<const Format> formats) const = 0;
+    make_tiles(const ValidTile& tile, std::span<const Format> formats) const = 0;
 
     // ---- the stages of make_tile, for the `tile` command, tests and benchmarks ----
 
     // The tile raster a tile is meshed from: (N+1) x (N+1) ellipsoidal heights, voids filled
     // (see fill_voids in tiler/gdal_source.hpp; a tile with no data near it lies at 0 m
     // orthometric, i.e. on the geoid). Same errors as make_tile.
-    virtual TileRaster make_raster(const TileId& id) const = 0;
+    virtual TileRaster make_raster(const ValidTile& tile) const = 0;
     // The encoded tile at an explicit published eps (metres, >= 0.001): raster, then
     // core::triangulate at error_budget(eps).mesh_eps with locked borders, then encode_tile with
     // the vertex normals of the DEM's slope (those of the terrain tiles' octvertexnormals).
-    virtual std::string make_tile_at(const TileId& id, Format format, double eps) const = 0;
+    virtual std::string make_tile_at(const ValidTile& tile, Format format, double eps) const = 0;
     // The mesh make_tile_at encodes, with its samples and budget. Same errors as make_tile.
-    virtual MeshedTile mesh_tile_at(const TileId& id, double eps) const = 0;
+    virtual MeshedTile mesh_tile_at(const ValidTile& tile, double eps) const = 0;
 
     virtual Guarantee guarantee() const = 0;
     // What zoom z's tiles read: Pixels at the zooms whose lattice is as fine as a pixel-grid
@@ -176,7 +182,7 @@ public:
     // The error a tile publishes at its zoom's eps (its tileset geometricError and .drc eps_m):
     // the budget's drawn bound, or for Measured layers the larger measured bound of that tile
     // (meshed here once if it was not made yet). Throws like make_tile.
-    virtual double tile_error(const TileId& id) const = 0;
+    virtual double tile_error(const ValidTile& tile) const = 0;
     // Tiles made so far whose measured error exceeded their zoom's eps: Measured layers' tiles,
     // and globe terrain tiles whose quantization left them above it (once per format made).
     virtual std::size_t tiles_over_eps() const = 0;

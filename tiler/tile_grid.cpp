@@ -67,12 +67,85 @@ std::int64_t tiles_down(Scheme, int z) {
     return std::int64_t{1} << z;
 }
 
+namespace {
+
 bool is_valid(Scheme scheme, const TileId& id) {
     if (id.z < 0 || id.z > kMaxZoom) {
         return false;
     }
     return id.x >= 0 && id.y >= 0 && id.x < tiles_across(scheme, id.z) &&
            id.y < tiles_down(scheme, id.z);
+}
+
+// Whether a range's tiles all lie in the scheme (an empty range does).
+bool in_scheme(Scheme scheme, const TileRange& r) {
+    return r.empty() ||
+           (is_valid(scheme, {r.z, r.x0, r.y0}) && is_valid(scheme, {r.z, r.x1, r.y1}));
+}
+
+} // namespace
+
+std::string tile_name(const TileId& id) {
+    return std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
+}
+
+std::optional<ValidTile> ValidTile::of(Scheme scheme, const TileId& id) {
+    if (!is_valid(scheme, id)) {
+        return std::nullopt;
+    }
+    return ValidTile(scheme, id);
+}
+
+ValidTile ValidTile::parse(Scheme scheme, const TileId& id) {
+    if (const std::optional<ValidTile> tile = of(scheme, id)) {
+        return *tile;
+    }
+    const std::string where =
+        "tile " + tile_name(id) + " is outside the " + to_string(scheme) + " scheme: ";
+    if (id.z < 0 || id.z > kMaxZoom) {
+        throw InputError(where + "zoom " + std::to_string(id.z) + " is outside 0.." +
+                         std::to_string(kMaxZoom));
+    }
+    throw InputError(where + "at zoom " + std::to_string(id.z) + ", x is 0.." +
+                     std::to_string(tiles_across(scheme, id.z) - 1) + " and y is 0.." +
+                     std::to_string(tiles_down(scheme, id.z) - 1));
+}
+
+ValidTile ValidTile::in_range(Scheme scheme, const TileRange& range, std::int64_t k) {
+    TB_ASSERT(in_scheme(scheme, range));
+    TB_ASSERT(k >= 0 && k < range.count());
+    const std::int64_t width = range.x1 - range.x0 + 1;
+    return ValidTile(scheme, {range.z, range.x0 + k % width, range.y0 + k / width});
+}
+
+std::optional<ValidTile> ValidTile::parent() const {
+    if (id_.z == 0) {
+        return std::nullopt;
+    }
+    return ValidTile(scheme_, {id_.z - 1, id_.x / 2, id_.y / 2});
+}
+
+std::vector<ValidTile> ValidTile::children() const {
+    std::vector<ValidTile> out;
+    if (id_.z == kMaxZoom) {
+        return out;
+    }
+    // Each zoom has twice the columns and rows of the one above in both schemes.
+    for (std::int64_t dy = 0; dy < 2; ++dy) {
+        for (std::int64_t dx = 0; dx < 2; ++dx) {
+            out.push_back(ValidTile(scheme_, {id_.z + 1, 2 * id_.x + dx, 2 * id_.y + dy}));
+        }
+    }
+    return out;
+}
+
+std::vector<ValidTile> tiles_in(Scheme scheme, const TileRange& range) {
+    std::vector<ValidTile> out;
+    out.reserve(static_cast<std::size_t>(range.count()));
+    for (std::int64_t k = 0; k < range.count(); ++k) {
+        out.push_back(ValidTile::in_range(scheme, range, k));
+    }
+    return out;
 }
 
 LonLatBox tile_bounds(Scheme scheme, const TileId& id) {

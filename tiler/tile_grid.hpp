@@ -4,8 +4,10 @@
 //             CesiumJS's GeographicTilingScheme and quantized-mesh layers.
 //   mercator: EPSG:3857, one root tile, XYZ (y counted from the north), as web slippy maps.
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <string_view>
+#include <vector>
 
 namespace tb::tiler {
 
@@ -39,7 +41,48 @@ const char* to_string(Scheme scheme);
 
 std::int64_t tiles_across(Scheme scheme, int z); // number of columns at zoom z
 std::int64_t tiles_down(Scheme scheme, int z);   // number of rows at zoom z
-bool is_valid(Scheme scheme, const TileId& id);  // 0 <= z <= kMaxZoom, x, y in range
+
+// A tile id of a scheme, valid by construction: 0 <= z <= kMaxZoom and x, y within the zoom's
+// columns and rows. Requests are parsed into one once, where they enter (a route, the `tile`
+// command, a tileset path); everything past that takes it and checks only what is its own
+// (a layer's zooms and data). The tiles it derives (parent, children, the tiles of a range
+// tiles_covering gave) are valid too, so they are made without another check.
+class ValidTile {
+public:
+    // The tile, or nullopt when id lies outside the scheme.
+    static std::optional<ValidTile> of(Scheme scheme, const TileId& id);
+    // The tile; InputError naming the id and the scheme's ranges when it lies outside.
+    static ValidTile parse(Scheme scheme, const TileId& id);
+    // The k-th tile (0 <= k < range.count()) of a range that lies in the scheme (as
+    // tiles_covering gives them), rows first: y0 row from x0 to x1, then the next row.
+    static ValidTile in_range(Scheme scheme, const TileRange& range, std::int64_t k);
+
+    Scheme scheme() const { return scheme_; }
+    const TileId& id() const { return id_; }
+    int z() const { return id_.z; }
+    std::int64_t x() const { return id_.x; }
+    std::int64_t y() const { return id_.y; }
+
+    // The tile of zoom z - 1 that holds it; nullopt at zoom 0.
+    std::optional<ValidTile> parent() const;
+    // The four tiles of zoom z + 1 it holds, (dx, dy) = (0, 0), (1, 0), (0, 1), (1, 1) in the
+    // scheme's own x and y directions; empty at kMaxZoom.
+    std::vector<ValidTile> children() const;
+
+    friend bool operator==(const ValidTile&, const ValidTile&) = default;
+    friend auto operator<=>(const ValidTile&, const ValidTile&) = default;
+
+private:
+    ValidTile(Scheme scheme, const TileId& id) : scheme_(scheme), id_(id) {}
+    Scheme scheme_;
+    TileId id_;
+};
+
+// Every tile of a range that lies in the scheme (ValidTile::in_range), in its order.
+std::vector<ValidTile> tiles_in(Scheme scheme, const TileRange& range);
+
+// "z/x/y", as messages name a tile.
+std::string tile_name(const TileId& id);
 
 // Lon/lat bounds of a tile (mercator tiles are converted from EPSG:3857 metres).
 LonLatBox tile_bounds(Scheme scheme, const TileId& id);

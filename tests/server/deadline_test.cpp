@@ -33,13 +33,13 @@ public:
     mutable std::atomic<int> delay_ms{0};
     mutable std::atomic<int> cancelled{0};
 
-    std::string make_tile(const tiler::TileId& id,
+    std::string make_tile(const tiler::ValidTile& tile,
                           tiler::Format format,
                           tiler::EpsChoice eps,
                           const tiler::CancelFn& cancel) const override {
         std::this_thread::sleep_for(std::chrono::milliseconds(delay_ms.load()));
         try {
-            return inner_->make_tile(id, format, eps, cancel);
+            return inner_->make_tile(tile, format, eps, cancel);
         } catch (const tiler::Cancelled&) {
             ++cancelled;
             throw;
@@ -53,27 +53,32 @@ public:
     double terrain_eps_for_zoom(int z) const override { return inner_->terrain_eps_for_zoom(z); }
     tiler::LonLatBox data_bounds() const override { return inner_->data_bounds(); }
     tiler::TileRange tiles_at(int z) const override { return inner_->tiles_at(z); }
-    bool may_have_tile(const tiler::TileId& id) const override { return inner_->may_have_tile(id); }
+    bool may_have_tile(const tiler::ValidTile& tile) const override {
+        return inner_->may_have_tile(tile);
+    }
     bool document(const std::string& path, std::string& out) const override {
         return inner_->document(path, out);
     }
     std::vector<std::pair<tiler::Format, std::string>>
-    make_tiles(const tiler::TileId& id, std::span<const tiler::Format> formats) const override {
-        return inner_->make_tiles(id, formats);
+    make_tiles(const tiler::ValidTile& tile,
+               std::span<const tiler::Format> formats) const override {
+        return inner_->make_tiles(tile, formats);
     }
-    tiler::TileRaster make_raster(const tiler::TileId& id) const override {
-        return inner_->make_raster(id);
+    tiler::TileRaster make_raster(const tiler::ValidTile& tile) const override {
+        return inner_->make_raster(tile);
     }
     std::string
-    make_tile_at(const tiler::TileId& id, tiler::Format format, double eps) const override {
-        return inner_->make_tile_at(id, format, eps);
+    make_tile_at(const tiler::ValidTile& tile, tiler::Format format, double eps) const override {
+        return inner_->make_tile_at(tile, format, eps);
     }
-    tiler::MeshedTile mesh_tile_at(const tiler::TileId& id, double eps) const override {
-        return inner_->mesh_tile_at(id, eps);
+    tiler::MeshedTile mesh_tile_at(const tiler::ValidTile& tile, double eps) const override {
+        return inner_->mesh_tile_at(tile, eps);
     }
     tiler::Guarantee guarantee() const override { return inner_->guarantee(); }
     tiler::ZoomSource zoom_source(int z) const override { return inner_->zoom_source(z); }
-    double tile_error(const tiler::TileId& id) const override { return inner_->tile_error(id); }
+    double tile_error(const tiler::ValidTile& tile) const override {
+        return inner_->tile_error(tile);
+    }
     std::size_t tiles_over_eps() const override { return inner_->tiles_over_eps(); }
     double min_height() const override { return inner_->min_height(); }
     double max_height() const override { return inner_->max_height(); }
@@ -112,7 +117,7 @@ struct SlowServer {
             options);
         warm = url(hills.inside, "glb");
         slow = {hills.inside.z, hills.inside.x + 1, hills.inside.y};
-        REQUIRE(hills.layer->may_have_tile(slow));
+        REQUIRE(hills.layer->may_have_tile(hills.layer->tile(slow)));
         const auto res = server->client().Get(warm);
         REQUIRE(res);
         REQUIRE(res->status == 200);
@@ -226,7 +231,8 @@ TEST_CASE("a request that waited for a generation to start has no more than its 
     options.threads = 1;
     options.start_wait = std::chrono::milliseconds(60000);
     options.deadline = std::chrono::milliseconds(400);
-    REQUIRE(hills.layer->may_have_tile({hills.inside.z, hills.inside.x + 1, hills.inside.y}));
+    REQUIRE(hills.layer->may_have_tile(
+        hills.layer->tile({hills.inside.z, hills.inside.x + 1, hills.inside.y})));
     RunningServer s({{layer, {tiler::Format::Glb}, nullptr}}, options);
     const auto url = [&](std::int64_t dx) {
         return "/hills/" + std::to_string(hills.inside.z) + "/" +

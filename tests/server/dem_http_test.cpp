@@ -104,7 +104,9 @@ TEST_CASE("TileJSON describes the DEM tiles and its tile URLs give the layer's t
                 CHECK(tile->get_header_value("Content-Type") == "image/png");
                 CHECK(tile->get_header_value("Cache-Control") == "public, max-age=604800");
                 CHECK(tile->get_header_value("Access-Control-Allow-Origin") == "*");
-                CHECK(tile->body == tiler::make_dem_tile(*f.layer, id, format));
+                CHECK(tile->body ==
+                      tiler::make_dem_tile(
+                          *f.layer, tiler::ValidTile::parse(tiler::Scheme::Mercator, id), format));
             }
         }
     }
@@ -115,8 +117,14 @@ TEST_CASE("TileJSON describes the DEM tiles and its tile URLs give the layer's t
     const tiler::TileId first{f.plan.max_zoom, f.finest.x0, f.finest.y0};
     auto tile = c.Get(dem_url(first).c_str());
     REQUIRE(tile);
-    CHECK(tile->body == tiler::make_dem_tile(*f.layer, first, tiler::Format::Terrarium));
-    CHECK(tile->body != tiler::make_dem_tile(*f.layer, first, tiler::Format::Mapbox));
+    CHECK(tile->body ==
+          tiler::make_dem_tile(*f.layer,
+                               tiler::ValidTile::parse(tiler::Scheme::Mercator, first),
+                               tiler::Format::Terrarium));
+    CHECK(tile->body !=
+          tiler::make_dem_tile(*f.layer,
+                               tiler::ValidTile::parse(tiler::Scheme::Mercator, first),
+                               tiler::Format::Mapbox));
     // A proxy's Host is what clients reach.
     auto proxied = c.Get("/hills/dem/tilejson.json", {{"Host", "tiles.example.org"}});
     REQUIRE(proxied);
@@ -182,6 +190,14 @@ TEST_CASE("bad DEM tile requests get 400, tiles beyond the zooms or the data 404
     CHECK(status("/hills/dem/a/0/0.png") == 400);
     CHECK(status("/hills/dem/25/0/0.png") == 400);
     CHECK(status(dem_url({3, 8, 0})) == 400); // x beyond 2^z
+    // The 400s of ids outside EPSG:3857 XYZ say which range they miss.
+    const auto error = [&](const std::string& url) { return c.Get(url.c_str())->body; };
+    CHECK(error("/hills/dem/25/0/0.png")
+              .find("tile 25/0/0 is outside the mercator scheme: zoom "
+                    "25 is outside 0..24") != std::string::npos);
+    CHECK(error(dem_url({3, 8, 0}))
+              .find("tile 3/8/0 is outside the mercator scheme: at zoom 3, "
+                    "x is 0..7 and y is 0..7") != std::string::npos);
     CHECK(status(dem_url({z + 1, 2 * in.x, 2 * in.y})) == 404);
     CHECK(status(dem_url({z, f.finest.x1 + 3, f.finest.y0})) == 404);
     if (f.plan.min_zoom > 0) {

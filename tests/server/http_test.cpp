@@ -92,7 +92,7 @@ TEST_CASE("every route answers with its content type, CORS and cache headers") {
     CHECK(!glb->has_header("Content-Encoding")); // binary tiles are never re-compressed
     REQUIRE(glb->body.size() > 12);
     CHECK(glb->body.substr(0, 4) == "glTF");
-    CHECK(glb->body == f.layer->make_tile(f.inside, tiler::Format::Glb));
+    CHECK(glb->body == f.layer->make_tile(f.layer->tile(f.inside), tiler::Format::Glb));
 
     auto drc = c.Get(tile_url(f.inside, "drc"));
     REQUIRE(drc);
@@ -103,7 +103,8 @@ TEST_CASE("every route answers with its content type, CORS and cache headers") {
     auto eps = c.Get(tile_url(f.inside) + "?eps=1");
     REQUIRE(eps);
     CHECK(eps->status == 200);
-    CHECK(eps->body == f.layer->make_tile(f.inside, tiler::Format::Glb, tiler::EpsChoice{1}));
+    CHECK(eps->body ==
+          f.layer->make_tile(f.layer->tile(f.inside), tiler::Format::Glb, tiler::EpsChoice{1}));
     CHECK(eps->body != glb->body);
 
     auto head = c.Head(tile_url(f.inside));
@@ -450,6 +451,41 @@ TEST_CASE("hostile and malformed URLs get 4xx JSON errors and the server keeps s
     auto nul = raw.Get("/hills/%00/x");
     REQUIRE(nul);
     CHECK(nul->status == 400);
+}
+
+TEST_CASE("a tile outside the scheme gets a 400 naming the tile and the scheme's ranges") {
+    auto& f = fixture();
+    RunningServer s({f.served()});
+    auto c = s.client();
+    const std::string z = std::to_string(f.inside.z);
+    const std::int64_t columns = tiler::tiles_across(tiler::Scheme::Geodetic, f.inside.z);
+    const std::int64_t rows = tiler::tiles_down(tiler::Scheme::Geodetic, f.inside.z);
+    const std::string ranges = "at zoom " + z + ", x is 0.." + std::to_string(columns - 1) +
+                               " and y is 0.." + std::to_string(rows - 1);
+    const std::vector<std::pair<std::string, std::string>> cases = {
+        {"/hills/25/1/1.glb",
+         "tile 25/1/1 is outside the geodetic scheme: zoom 25 is outside 0..24"},
+        {"/hills/99/0/0.drc",
+         "tile 99/0/0 is outside the geodetic scheme: zoom 99 is outside 0..24"},
+        {"/hills/" + z + "/" + std::to_string(columns) + "/0.glb",
+         "tile " + z + "/" + std::to_string(columns) +
+             "/0 is outside the geodetic scheme: " + ranges},
+        {"/hills/" + z + "/0/" + std::to_string(rows) + ".glb",
+         "tile " + z + "/0/" + std::to_string(rows) + " is outside the geodetic scheme: " + ranges},
+    };
+    // Twice: the second request may take the connection loop's quick path first, which finds
+    // nothing cached for such an id and leaves it to the route.
+    for (int pass = 0; pass < 2; ++pass) {
+        for (const auto& [url, message] : cases) {
+            INFO(url);
+            auto res = c.Get(url);
+            REQUIRE(res);
+            CHECK(res->status == 400);
+            const auto j = nlohmann::json::parse(res->body, nullptr, false);
+            REQUIRE((j.is_object() && j["error"].is_string()));
+            CHECK(j["error"].get<std::string>() == message);
+        }
+    }
 }
 
 TEST_CASE("a full generation queue answers 503 with Retry-After") {

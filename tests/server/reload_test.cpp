@@ -51,7 +51,7 @@ std::string config_text(int watch_interval_s) {
 // The glb a layer freshly opened on dir/hills.asc makes for kTile.
 std::string fresh_tile(const test::TempDir& dir) {
     const auto layer = tiler::Layer::open(test::test_layer_options(dir / "hills.asc", "hills"));
-    return layer->make_tile(tiler::TileId{8, 272, 210}, tiler::Format::Glb);
+    return layer->make_tile(layer->tile(tiler::TileId{8, 272, 210}), tiler::Format::Glb);
 }
 
 // `terrabound serve` on dir/hills.asc (257 x 257 samples) with a directory store, checking its

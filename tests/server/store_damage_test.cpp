@@ -40,7 +40,7 @@ TEST_CASE("a damaged tile in either store is made again over HTTP, served whole 
     const auto r = layer->tiles_at(layer->max_zoom());
     REQUIRE(!r.empty());
     const tiler::TileId id{layer->max_zoom(), r.x0, r.y0};
-    const std::string good = layer->make_tile(id, tiler::Format::Glb);
+    const std::string good = layer->make_tile(layer->tile(id), tiler::Format::Glb);
     const std::string url = "/hills/" + std::to_string(id.z) + "/" + std::to_string(id.x) + "/" +
                             std::to_string(id.y) + ".glb";
     const tiler::TileKey key{"hills", id, tiler::Format::Glb, -1};
@@ -106,6 +106,6 @@ TEST_CASE("a tile that is a symbolic link out of a directory store is never serv
                               std::to_string(id.y) + ".glb");
     REQUIRE(res);
     CHECK(res->status == 200);
-    CHECK(res->body == layer->make_tile(id, tiler::Format::Glb));
+    CHECK(res->body == layer->make_tile(layer->tile(id), tiler::Format::Glb));
     CHECK(test::read_file(dir / "secret") == secret);
 }

@@ -163,7 +163,7 @@ TEST_CASE("a terrain tile carries exactly the extensions its Accept header names
     auto c = server.client();
     const auto r = f.layer->tiles_at(f.layer->max_zoom());
     const tiler::TileId id{f.layer->max_zoom(), r.x0, r.y0};
-    const std::string full = f.layer->make_tile(id, tiler::Format::Terrain);
+    const std::string full = f.layer->make_tile(f.layer->tile(id), tiler::Format::Terrain);
 
     const auto get = [&](const char* accept) {
         httplib::Headers h{{"Accept-Encoding", "gzip"}};
@@ -208,7 +208,7 @@ TEST_CASE("a store whose .terrain tiles hold only some extensions (a build's def
     TempDir dir;
     const auto r = f.layer->tiles_at(f.layer->max_zoom());
     const tiler::TileId id{f.layer->max_zoom(), r.x0, r.y0};
-    const std::string full = f.layer->make_tile(id, tiler::Format::Terrain);
+    const std::string full = f.layer->make_tile(f.layer->tile(id), tiler::Format::Terrain);
     const std::string cut = tiler::select_extensions(full, tiler::kMetadata);
     auto store = std::shared_ptr<tiler::TileStore>(tiler::TileStore::open(dir / "out"));
     const tiler::TileKey key{"hills", id, tiler::Format::Terrain, -1};
@@ -323,6 +323,8 @@ TEST_CASE("terrain tiles: filler at zoom 0, 404 beyond max zoom, 400 outside the
         auto res = c.Get(terrain_url(id).c_str());
         REQUIRE(res);
         CHECK(res->status == 400);
+        CHECK(res->body.find("is outside the geodetic scheme: at zoom " + std::to_string(id.z) +
+                             ", x is 0..") != std::string::npos);
     }
     auto bad = c.Get("/hills/1/x/0.terrain");
     REQUIRE(bad);
@@ -379,7 +381,7 @@ TEST_CASE("3D Tiles terrain over HTTP: /layers names terrain/tileset.json; its s
     REQUIRE(glb);
     REQUIRE(glb->status == 200);
     CHECK(glb->get_header_value("Content-Type") == "model/gltf-binary");
-    CHECK(glb->body == f.layer->make_tile(id, tiler::Format::Terrain3d));
+    CHECK(glb->body == f.layer->make_tile(f.layer->tile(id), tiler::Format::Terrain3d));
     const tb_terrain3d::Glb g = tb_terrain3d::read_glb(glb->body);
     CHECK(g.drawn.indices.size() >= 6);
     CHECK(g.normals.size() == g.drawn.ecef.size());

@@ -129,7 +129,8 @@ inline std::map<tb::tiler::TileId, std::string> expected_dem_tiles(const std::st
         const TileRange r = dem_tiles_at(*layer, z);
         for (std::int64_t y = r.y0; y <= r.y1; ++y) {
             for (std::int64_t x = r.x0; x <= r.x1; ++x) {
-                tiles[TileId{z, x, y}] = make_dem_tile(*layer, TileId{z, x, y}, format);
+                tiles[TileId{z, x, y}] = make_dem_tile(
+                    *layer, ValidTile::parse(Scheme::Mercator, TileId{z, x, y}), format);
             }
         }
     }

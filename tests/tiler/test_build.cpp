@@ -630,8 +630,10 @@ TEST_CASE("build --formats glb,terrarium,mapbox writes the DEM pyramid beside th
                 const TileId id{z, x, y};
                 const std::string zxy =
                     std::to_string(z) + "/" + std::to_string(x) + "/" + std::to_string(y);
-                expected["dem/" + zxy + ".png"] = make_dem_tile(*layer, id, Format::Terrarium);
-                expected["dem/mapbox/" + zxy + ".png"] = make_dem_tile(*layer, id, Format::Mapbox);
+                expected["dem/" + zxy + ".png"] = make_dem_tile(
+                    *layer, ValidTile::parse(Scheme::Mercator, id), Format::Terrarium);
+                expected["dem/mapbox/" + zxy + ".png"] =
+                    make_dem_tile(*layer, ValidTile::parse(Scheme::Mercator, id), Format::Mapbox);
                 ++dem_tiles;
             }
         }
@@ -849,7 +851,8 @@ TEST_CASE("build --formats glb,terrain writes layer.json and every terrain tile 
                     const TileId id{static_cast<int>(level), x, y};
                     expected[std::to_string(level) + "/" + std::to_string(x) + "/" +
                              std::to_string(y) + ".terrain"] =
-                        select_extensions(layer->make_tile(id, Format::Terrain), kMetadata);
+                        select_extensions(layer->make_tile(layer->tile(id), Format::Terrain),
+                                          kMetadata);
                 }
             }
         }
@@ -910,7 +913,7 @@ TEST_CASE("build --terrain-extensions all keeps the layer's whole terrain tiles 
     for (const TileId id : {TileId{0, 0, 0}, TileId{0, 1, 0}}) {
         CAPTURE(id.x);
         CHECK(store->get(TileKey{"terrain", id, Format::Terrain, -1}) ==
-              layer->make_tile(id, Format::Terrain));
+              layer->make_tile(layer->tile(id), Format::Terrain));
     }
 
     const Run other = run(args(dem, dir / "out", {"--formats", "terrain", "--resume"}), dir);
@@ -1054,7 +1057,7 @@ TEST_CASE("build --formats terrain3d writes terrain/tileset.json, every subtree 
                         const std::int64_t x = sx * side + i, y = sy * side + j;
                         expected[std::to_string(r) + "/" + std::to_string(z) + "/" +
                                  std::to_string(x) + "/" + std::to_string(y) + ".glb"] =
-                            layer->make_tile(TileId{z, (std::int64_t{r} << z) + x, y},
+                            layer->make_tile(layer->tile(TileId{z, (std::int64_t{r} << z) + x, y}),
                                              Format::Terrain3d);
                     }
                 }

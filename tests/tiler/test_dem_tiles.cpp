@@ -155,7 +155,8 @@ LonLat pixel_centre(const TileId& id, int size, int i, int j) {
 std::size_t
 check_tile_against(const Layer& layer, const Reference& ref, const TileId& id, Format format) {
     const int p = layer.options().dem_tile_size;
-    const DecodedPng png = decode_png(make_dem_tile(layer, id, format));
+    const DecodedPng png =
+        decode_png(make_dem_tile(layer, ValidTile::parse(Scheme::Mercator, id), format));
     REQUIRE(png.width == p);
     REQUIRE(png.height == p);
     CHECK(png.bands == 3); // opaque: voids are filled, never transparent
@@ -300,7 +301,8 @@ TEST_CASE("DEM tiles fill voids and the area beyond the DEM from the data, and s
     std::size_t tiles = 0;
     for (std::int64_t y = r.y0; y <= r.y1; ++y) {
         for (std::int64_t x = r.x0; x <= r.x1; ++x) {
-            const auto heights = dem_tile_heights(*layer, TileId{plan.max_zoom, x, y});
+            const auto heights = dem_tile_heights(
+                *layer, ValidTile::parse(Scheme::Mercator, TileId{plan.max_zoom, x, y}));
             REQUIRE(heights.size() == 256u * 256u);
             for (double h : heights) {
                 REQUIRE(std::isfinite(h));
@@ -327,7 +329,8 @@ TEST_CASE("DEM tile pixels beyond the DEM's footprint carry the height of the ne
     std::vector<double> h(static_cast<std::size_t>(cols * rows));
     for (std::int64_t y = r.y0; y <= r.y1; ++y) {
         for (std::int64_t x = r.x0; x <= r.x1; ++x) {
-            const auto tile = dem_tile_heights(*layer, TileId{z, x, y});
+            const auto tile =
+                dem_tile_heights(*layer, ValidTile::parse(Scheme::Mercator, TileId{z, x, y}));
             for (int j = 0; j < p; ++j) {
                 for (int i = 0; i < p; ++i) {
                     h[static_cast<std::size_t>((y * p + j - r0) * cols + (x * p + i - c0))] =
@@ -387,8 +390,8 @@ TEST_CASE("DEM tiles in ellipsoidal heights are the sea-level ones plus the EGM9
     const int z = dem_tile_plan(*sea).max_zoom;
     const TileRange r = dem_tiles_at(*sea, z);
     const TileId id{z, r.x0, r.y0};
-    const auto a = dem_tile_heights(*sea, id);
-    const auto b = dem_tile_heights(*ellipsoid, id);
+    const auto a = dem_tile_heights(*sea, ValidTile::parse(Scheme::Mercator, id));
+    const auto b = dem_tile_heights(*ellipsoid, ValidTile::parse(Scheme::Mercator, id));
     REQUIRE(a.size() == b.size());
     double worst = 0;
     for (int j = 0; j < 512; j += 7) {
@@ -416,9 +419,10 @@ TEST_CASE("an ellipsoidal source loses the undulation at sea level and keeps its
     const int z = dem_tile_plan(*egm96).max_zoom;
     const TileRange r = dem_tiles_at(*egm96, z);
     const TileId id{z, r.x1, r.y1};
-    const auto source = dem_tile_heights(*egm96, id); // the source's own numbers
-    const auto a = dem_tile_heights(*sea, id);
-    const auto b = dem_tile_heights(*ellipsoid, id);
+    const auto source = dem_tile_heights(
+        *egm96, ValidTile::parse(Scheme::Mercator, id)); // the source's own numbers
+    const auto a = dem_tile_heights(*sea, ValidTile::parse(Scheme::Mercator, id));
+    const auto b = dem_tile_heights(*ellipsoid, ValidTile::parse(Scheme::Mercator, id));
     const Reference ref(path);
     std::size_t measured = 0;
     for (int j = 0; j < 512; ++j) {
@@ -441,13 +445,22 @@ TEST_CASE("DEM tiles outside EPSG:3857, the zooms or the data are refused with t
     const auto layer = open_dem_layer(write_test_dem(dir));
     const DemTilePlan plan = dem_tile_plan(*layer);
     const TileRange r = dem_tiles_at(*layer, plan.max_zoom);
-    CHECK_THROWS_AS(dem_tile_heights(*layer, TileId{3, 8, 0}), tb::InputError);
-    CHECK_THROWS_AS(dem_tile_heights(*layer, TileId{25, 0, 0}), tb::InputError);
-    CHECK_THROWS_AS(dem_tile_heights(*layer, TileId{plan.max_zoom + 1, 2 * r.x0, 2 * r.y0}),
-                    tb::NotFound);
-    CHECK_THROWS_AS(dem_tile_heights(*layer, TileId{plan.max_zoom, 0, 0}), tb::NotFound);
+    CHECK_THROWS_AS(dem_tile_heights(*layer, ValidTile::parse(Scheme::Mercator, TileId{3, 8, 0})),
+                    tb::InputError);
+    CHECK_THROWS_AS(dem_tile_heights(*layer, ValidTile::parse(Scheme::Mercator, TileId{25, 0, 0})),
+                    tb::InputError);
+    CHECK_THROWS_AS(
+        dem_tile_heights(
+            *layer,
+            ValidTile::parse(Scheme::Mercator, TileId{plan.max_zoom + 1, 2 * r.x0, 2 * r.y0})),
+        tb::NotFound);
+    CHECK_THROWS_AS(
+        dem_tile_heights(*layer, ValidTile::parse(Scheme::Mercator, TileId{plan.max_zoom, 0, 0})),
+        tb::NotFound);
     if (plan.min_zoom > 0) {
-        CHECK_THROWS_AS(dem_tile_heights(*layer, TileId{0, 0, 0}), tb::NotFound);
+        CHECK_THROWS_AS(
+            dem_tile_heights(*layer, ValidTile::parse(Scheme::Mercator, TileId{0, 0, 0})),
+            tb::NotFound);
     }
     LayerOptions o = layer->options();
     o.dem_tile_size = 300;

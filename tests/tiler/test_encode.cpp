@@ -500,7 +500,8 @@ TEST_CASE(
         REQUIRE(!range.empty());
         const TileId id{z, range.x0, range.y0};
         // Checked against the source's own pixels, the samples the tile is meshed on.
-        const TileRaster raster = layer->mesh_tile_at(id, layer->eps_for_zoom(z)).raster;
+        const TileRaster raster =
+            layer->mesh_tile_at(layer->tile(id), layer->eps_for_zoom(z)).raster;
         CHECK(raster.frame.dx > 0); // both schemes: the DEM is lon/lat
         for (double eps : {layer->eps_for_zoom(z), 0.5}) {
             CAPTURE(eps);
@@ -508,7 +509,7 @@ TEST_CASE(
             for (Format f : {Format::Glb, Format::Drc}) {
                 CAPTURE(f == Format::Glb ? "glb" : "drc");
                 const test::OracleResult res =
-                    decoded_error(layer->make_tile_at(id, f, eps), f, raster, b);
+                    decoded_error(layer->make_tile_at(layer->tile(id), f, eps), f, raster, b);
                 CHECK(res.uncovered == 0);
                 CHECK(res.checked > 1000);
                 CHECK(res.max_error <= eps);
@@ -521,7 +522,7 @@ TEST_CASE(
         const double reach = 4 * error_budget(layer->eps_for_zoom(z)).quant_step / 6.3e6 * 180 /
                              3.14159265358979323846 / std::cos(33.0 / 180 * 3.14159265358979323846);
         const auto on_edge = [&](const TileId& t) {
-            const DecodedTile d = decode_glb(layer->make_tile(t, Format::Glb));
+            const DecodedTile d = decode_glb(layer->make_tile(layer->tile(t), Format::Glb));
             std::set<std::tuple<double, double, double>> out;
             for (const Ecef& p : decoded_ecef(d, Format::Glb)) {
                 if (std::abs(to_geodetic(p).lon - edge) < reach) {

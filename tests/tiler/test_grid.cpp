@@ -6,8 +6,13 @@
 
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <optional>
 #include <random>
+#include <set>
+#include <string>
+#include <vector>
 
 using namespace tb::tiler;
 
@@ -43,20 +48,126 @@ TEST_CASE("mercator has one root tile up to 85.0511 degrees, y counted from the 
     CHECK(nw.south == doctest::Approx(0.0).epsilon(1e-12));
 }
 
-TEST_CASE("tile ids outside the scheme are not valid") {
+TEST_CASE("tile ids outside the scheme are not valid tiles") {
     for (Scheme s : {Scheme::Geodetic, Scheme::Mercator}) {
-        CHECK(is_valid(s, {0, 0, 0}));
-        CHECK_FALSE(is_valid(s, {-1, 0, 0}));
-        CHECK_FALSE(is_valid(s, {kMaxZoom + 1, 0, 0}));
-        CHECK_FALSE(is_valid(s, {3, -1, 0}));
-        CHECK_FALSE(is_valid(s, {3, 0, -1}));
-        CHECK_FALSE(is_valid(s, {3, tiles_across(s, 3), 0}));
-        CHECK_FALSE(is_valid(s, {3, 0, tiles_down(s, 3)}));
-        CHECK_FALSE(is_valid(s, {2, std::int64_t{1} << 62, 0}));
-        CHECK(is_valid(s, {kMaxZoom, tiles_across(s, kMaxZoom) - 1, tiles_down(s, kMaxZoom) - 1}));
+        CAPTURE(to_string(s));
+        CHECK(ValidTile::of(s, {0, 0, 0}));
+        CHECK_FALSE(ValidTile::of(s, {-1, 0, 0}));
+        CHECK_FALSE(ValidTile::of(s, {kMaxZoom + 1, 0, 0}));
+        CHECK_FALSE(ValidTile::of(s, {3, -1, 0}));
+        CHECK_FALSE(ValidTile::of(s, {3, 0, -1}));
+        CHECK_FALSE(ValidTile::of(s, {3, tiles_across(s, 3), 0}));
+        CHECK_FALSE(ValidTile::of(s, {3, 0, tiles_down(s, 3)}));
+        CHECK_FALSE(ValidTile::of(s, {2, std::int64_t{1} << 62, 0}));
+        CHECK(ValidTile::of(
+            s, {kMaxZoom, tiles_across(s, kMaxZoom) - 1, tiles_down(s, kMaxZoom) - 1}));
     }
-    CHECK(is_valid(Scheme::Geodetic, {1, 3, 1}));
-    CHECK_FALSE(is_valid(Scheme::Mercator, {1, 3, 1}));
+    CHECK(ValidTile::of(Scheme::Geodetic, {1, 3, 1}));
+    CHECK_FALSE(ValidTile::of(Scheme::Mercator, {1, 3, 1}));
+}
+
+TEST_CASE("ValidTile::parse takes the last tile of each range and names the first one past it") {
+    // At zoom 3 geodetic has 16 x 8 tiles, mercator 8 x 8.
+    const ValidTile g = ValidTile::parse(Scheme::Geodetic, {3, 15, 7});
+    CHECK(g.scheme() == Scheme::Geodetic);
+    CHECK(g.id() == TileId{3, 15, 7});
+    CHECK(g.z() == 3);
+    CHECK(g.x() == 15);
+    CHECK(g.y() == 7);
+    CHECK(ValidTile::parse(Scheme::Mercator, {3, 7, 7}).id() == TileId{3, 7, 7});
+    CHECK(ValidTile::parse(Scheme::Mercator, {kMaxZoom, 0, 0}).z() == kMaxZoom);
+    CHECK_THROWS_WITH_AS(ValidTile::parse(Scheme::Geodetic, {3, 16, 0}),
+                         "tile 3/16/0 is outside the geodetic scheme: at zoom 3, x is 0..15 and "
+                         "y is 0..7",
+                         tb::InputError);
+    CHECK_THROWS_WITH_AS(ValidTile::parse(Scheme::Geodetic, {3, 0, 8}),
+                         doctest::Contains("tile 3/0/8 is outside the geodetic scheme"),
+                         tb::InputError);
+    CHECK_THROWS_WITH_AS(ValidTile::parse(Scheme::Mercator, {3, 8, 0}),
+                         "tile 3/8/0 is outside the mercator scheme: at zoom 3, x is 0..7 and "
+                         "y is 0..7",
+                         tb::InputError);
+    CHECK_THROWS_WITH_AS(ValidTile::parse(Scheme::Mercator, {3, 0, 8}),
+                         doctest::Contains("tile 3/0/8 is outside the mercator scheme"),
+                         tb::InputError);
+    for (Scheme s : {Scheme::Geodetic, Scheme::Mercator}) {
+        CAPTURE(to_string(s));
+        CHECK_THROWS_WITH_AS(
+            ValidTile::parse(s, {kMaxZoom + 1, 0, 0}),
+            doctest::Contains(("tile 25/0/0 is outside the " + std::string(to_string(s)) +
+                               " scheme: zoom 25 is outside 0..24")
+                                  .c_str()),
+            tb::InputError);
+        CHECK_THROWS_WITH_AS(ValidTile::parse(s, {-1, 0, 0}),
+                             doctest::Contains("zoom -1 is outside 0..24"),
+                             tb::InputError);
+        CHECK_THROWS_WITH_AS(ValidTile::parse(s, {2, -1, 0}),
+                             doctest::Contains("tile 2/-1/0 is outside"),
+                             tb::InputError);
+        CHECK_THROWS_WITH_AS(ValidTile::parse(s, {2, 0, -1}),
+                             doctest::Contains("tile 2/0/-1 is outside"),
+                             tb::InputError);
+    }
+}
+
+TEST_CASE("the parent and the children of a valid tile are valid and hold each other") {
+    for (Scheme s : {Scheme::Geodetic, Scheme::Mercator}) {
+        CAPTURE(to_string(s));
+        // Both roots' corners at zoom 0, the last tile of a middle zoom, and kMaxZoom's last.
+        const std::vector<TileId> ids{{0, 0, 0},
+                                      {0, tiles_across(s, 0) - 1, 0},
+                                      {5, tiles_across(s, 5) - 1, tiles_down(s, 5) - 1},
+                                      {12, 1234, 987},
+                                      {kMaxZoom - 1, tiles_across(s, kMaxZoom - 1) - 1, 0},
+                                      {kMaxZoom, tiles_across(s, kMaxZoom) - 1, 0}};
+        for (const TileId& id : ids) {
+            CAPTURE(tile_name(id));
+            const ValidTile tile = ValidTile::parse(s, id);
+            const std::optional<ValidTile> parent = tile.parent();
+            CHECK(parent.has_value() == (id.z > 0));
+            if (parent) {
+                CHECK(ValidTile::of(s, parent->id()) == parent);
+                const std::vector<ValidTile> siblings = parent->children();
+                CHECK(std::find(siblings.begin(), siblings.end(), tile) != siblings.end());
+            }
+            const std::vector<ValidTile> children = tile.children();
+            CHECK(children.size() == (id.z < kMaxZoom ? 4u : 0u));
+            for (const ValidTile& child : children) {
+                CHECK(ValidTile::of(s, child.id()) == child);
+                CHECK(child.z() == id.z + 1);
+                CHECK(child.parent() == tile);
+                // The child's box lies inside its parent's.
+                const LonLatBox a = tile_bounds(s, id), b = tile_bounds(s, child.id());
+                CHECK(b.west >= a.west - 1e-9);
+                CHECK(b.east <= a.east + 1e-9);
+                CHECK(b.south >= a.south - 1e-9);
+                CHECK(b.north <= a.north + 1e-9);
+            }
+        }
+    }
+}
+
+TEST_CASE("tiles_in gives every tile of a covering range once, rows first") {
+    for (Scheme s : {Scheme::Geodetic, Scheme::Mercator}) {
+        CAPTURE(to_string(s));
+        const TileRange r = tiles_covering(s, {-71.5, 44.0, -70.1, 44.9}, 9);
+        REQUIRE(r.count() > 1);
+        const std::vector<ValidTile> tiles = tiles_in(s, r);
+        REQUIRE(static_cast<std::int64_t>(tiles.size()) == r.count());
+        CHECK(tiles.front().id() == TileId{9, r.x0, r.y0});
+        CHECK(tiles.back().id() == TileId{9, r.x1, r.y1});
+        for (std::int64_t k = 0; k < r.count(); ++k) {
+            const ValidTile& t = tiles[static_cast<std::size_t>(k)];
+            CHECK(t == ValidTile::in_range(s, r, k));
+            CHECK(t.scheme() == s);
+            CHECK(t.y() == r.y0 + k / (r.x1 - r.x0 + 1));
+        }
+        CHECK(std::set<ValidTile>(tiles.begin(), tiles.end()).size() == tiles.size());
+        // The whole of zoom 0: both geodetic roots, or the one mercator tile.
+        CHECK(tiles_in(s, tiles_covering(s, {-180, -85, 180, 85}, 0)).size() ==
+              static_cast<std::size_t>(tiles_across(s, 0)));
+        CHECK(tiles_in(s, TileRange{3, 0, 0, -1, -1}).empty());
+    }
 }
 
 TEST_CASE("a tile's own box, shrunk slightly, is covered by exactly that tile (seed 7)") {

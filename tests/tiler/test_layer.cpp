@@ -126,10 +126,10 @@ TEST_CASE("an SRTM cell gets zooms 7..10, a doubling eps ladder and consistent t
     for (int z = 7; z <= 10; ++z) {
         const TileRange r = layer->tiles_at(z);
         CHECK(r.count() > 0);
-        CHECK(layer->may_have_tile({z, r.x0, r.y0}));
-        CHECK(layer->may_have_tile({z, r.x1, r.y1}));
-        CHECK_FALSE(layer->may_have_tile({z, r.x0 - 1, r.y0}));
-        CHECK_FALSE(layer->may_have_tile({z, r.x1, r.y1 + 1}));
+        CHECK(layer->may_have_tile(layer->tile({z, r.x0, r.y0})));
+        CHECK(layer->may_have_tile(layer->tile({z, r.x1, r.y1})));
+        CHECK_FALSE(layer->may_have_tile(layer->tile({z, r.x0 - 1, r.y0})));
+        CHECK_FALSE(layer->may_have_tile(layer->tile({z, r.x1, r.y1 + 1})));
     }
     CHECK(layer->min_height() < 115 - 28); // lowest sample plus the geoid (about -28 m)
     CHECK(layer->max_height() > 1908 - 30);
@@ -145,19 +145,31 @@ TEST_CASE("tile ids outside the scheme are input errors, tiles outside the data 
         return;
     }
     const auto layer = open_layer({*path});
-    CHECK_THROWS_WITH_AS(
-        layer->make_raster({25, 0, 0}), doctest::Contains("outside the geodetic"), tb::InputError);
-    CHECK_THROWS_AS(layer->make_raster({3, 16, 0}), tb::InputError);
-    CHECK_THROWS_AS(layer->make_raster({3, -1, 0}), tb::InputError);
-    CHECK_THROWS_WITH_AS(
-        layer->make_raster({10, 0, 0}), doctest::Contains("has no data there"), tb::NotFound);
-    CHECK_THROWS_AS(layer->make_raster({5, 9, 22}), tb::NotFound); // above min zoom
+    // An id is parsed in the layer's scheme before any stage sees it.
+    CHECK_THROWS_WITH_AS(layer->tile({25, 0, 0}),
+                         doctest::Contains("outside the geodetic scheme: zoom 25 is outside 0..24"),
+                         tb::InputError);
+    CHECK_THROWS_WITH_AS(layer->tile({3, 16, 0}),
+                         doctest::Contains("at zoom 3, x is 0..15 and y is 0..7"),
+                         tb::InputError);
+    CHECK_THROWS_AS(layer->tile({3, -1, 0}), tb::InputError);
+    const auto mercator = open_layer({*path}, Scheme::Mercator);
+    CHECK_THROWS_WITH_AS(mercator->tile({3, 8, 0}),
+                         doctest::Contains("outside the mercator scheme"),
+                         tb::InputError);
+    CHECK(mercator->tile({3, 7, 0}).scheme() == Scheme::Mercator);
+    CHECK_THROWS_WITH_AS(layer->make_raster(layer->tile({10, 0, 0})),
+                         doctest::Contains("has no data there"),
+                         tb::NotFound);
+    CHECK_THROWS_AS(layer->make_raster(layer->tile({5, 9, 22})), tb::NotFound); // above min zoom
     const TileRange r = layer->tiles_at(10);
-    CHECK_THROWS_WITH_AS(layer->make_tile({10, r.x0, r.y0}, Format::Glb, EpsChoice{3}),
+    CHECK_THROWS_WITH_AS(layer->make_tile(layer->tile({10, r.x0, r.y0}), Format::Glb, EpsChoice{3}),
                          doctest::Contains("eps level 3"),
                          tb::InputError);
-    CHECK_THROWS_AS(layer->make_tile_at({10, r.x0, r.y0}, Format::Glb, 0.0), tb::InputError);
-    CHECK_THROWS_AS(layer->make_tile_at({10, r.x0, r.y0}, Format::Glb, NAN), tb::InputError);
+    CHECK_THROWS_AS(layer->make_tile_at(layer->tile({10, r.x0, r.y0}), Format::Glb, 0.0),
+                    tb::InputError);
+    CHECK_THROWS_AS(layer->make_tile_at(layer->tile({10, r.x0, r.y0}), Format::Glb, NAN),
+                    tb::InputError);
 }
 
 TEST_CASE("EGM96 heights become ellipsoidal by adding the geoid undulation") {
@@ -168,7 +180,7 @@ TEST_CASE("EGM96 heights become ellipsoidal by adding the geoid undulation") {
     const auto egm = open_layer({*path}, Scheme::Geodetic, VerticalDatum::Egm96);
     const auto ell = open_layer({*path}, Scheme::Geodetic, VerticalDatum::Ellipsoid);
     const TileId id{9, 308, 382};
-    const TileRaster a = egm->make_raster(id), b = ell->make_raster(id);
+    const TileRaster a = egm->make_raster(egm->tile(id)), b = ell->make_raster(ell->tile(id));
     for (int k : {0, 77, 128, 256}) {
         const LonLat p = grid_to_lonlat(a, k, 256 - k);
         const double n = egm96_undulation(p.lon, p.lat);
@@ -270,11 +282,12 @@ TEST_CASE("two SRTM cells mosaic into one layer that matches each cell where it 
     CHECK(both->data_bounds().south == doctest::Approx(44));
     CHECK(both->data_bounds().north == doctest::Approx(46));
     const TileId inside{10, 617, 765};
-    const TileRaster a = both->make_raster(inside), b = alone->make_raster(inside);
+    const TileRaster a = both->make_raster(both->tile(inside)),
+                     b = alone->make_raster(alone->tile(inside));
     CHECK(a.grid.heights == b.grid.heights);
     // A tile across the 45 N seam has data on both sides.
     const TileId seam{10, 617, 768}; // rows 45.0 - 45.17 N... and below
-    const TileRaster s = both->make_raster(seam);
+    const TileRaster s = both->make_raster(both->tile(seam));
     CHECK(s.grid.valid.empty());
 }
 
@@ -292,7 +305,7 @@ TEST_CASE("a projected DEM tiles in both schemes, voids outside its outline") {
         bool some_valid = false;
         for (std::int64_t x = r.x0; x <= r.x1; ++x) {
             for (std::int64_t y = r.y0; y <= r.y1; ++y) {
-                const TileRaster t = layer->make_raster({z, x, y});
+                const TileRaster t = layer->make_raster(layer->tile({z, x, y}));
                 CHECK_FALSE(t.grid.valid.empty()); // part of every tile lies outside the DEM
                 for (std::size_t k = 0; k < t.grid.heights.size(); ++k) {
                     CHECK(std::isfinite(t.grid.heights[k]));
@@ -324,12 +337,13 @@ TEST_CASE("encoded tiles decode, and many threads get the same bytes as one") {
     }
     std::vector<std::string> sequential;
     for (const auto& id : ids) {
-        sequential.push_back(layer->make_tile(id, Format::Glb));
+        sequential.push_back(layer->make_tile(layer->tile(id), Format::Glb));
     }
     std::vector<std::future<std::string>> parallel;
     for (const auto& id : ids) {
-        parallel.push_back(
-            std::async(std::launch::async, [&, id] { return layer->make_tile(id, Format::Glb); }));
+        parallel.push_back(std::async(std::launch::async, [&, id] {
+            return layer->make_tile(layer->tile(id), Format::Glb);
+        }));
     }
     for (std::size_t k = 0; k < ids.size(); ++k) {
         CHECK(parallel[k].get() == sequential[k]);
@@ -337,7 +351,7 @@ TEST_CASE("encoded tiles decode, and many threads get the same bytes as one") {
     const DecodedTile decoded = decode_glb(sequential[0]);
     CHECK(decoded.indices.size() >= 6);
     CHECK(decoded.positions.size() >= 4);
-    const DecodedTile drc = decode_drc(layer->make_tile(ids[0], Format::Drc));
+    const DecodedTile drc = decode_drc(layer->make_tile(layer->tile(ids[0]), Format::Drc));
     CHECK(drc.indices.size() == decoded.indices.size());
 }
 
@@ -355,7 +369,7 @@ TEST_CASE("a max_zoom below the native zoom scales the default eps to that zoom'
     // 4 x 1.74 m at z8, never the native finest eps (whose lattice z8 tiles cannot hold).
     CHECK(layer->eps_for_zoom(8) == doctest::Approx(3.3 * native->eps_for_zoom(10)).epsilon(0.1));
     const TileRange r = layer->tiles_at(8);
-    const std::string glb = layer->make_tile({8, r.x0, r.y0}, Format::Glb, {});
+    const std::string glb = layer->make_tile(layer->tile({8, r.x0, r.y0}), Format::Glb, {});
     CHECK(glb.size() > 1000);
 }
 
@@ -459,11 +473,11 @@ TEST_CASE("make_tiles gives, format by format, exactly make_tile's bytes, on pix
             std::vector<std::pair<Format, std::string>> one_by_one;
             for (Format format : formats) {
                 try {
-                    one_by_one.emplace_back(format, layer->make_tile(id, format));
+                    one_by_one.emplace_back(format, layer->make_tile(layer->tile(id), format));
                 } catch (const tb::NotFound&) {
                 }
             }
-            const auto together = layer->make_tiles(id, formats);
+            const auto together = layer->make_tiles(layer->tile(id), formats);
             REQUIRE(together.size() == one_by_one.size());
             for (std::size_t k = 0; k < together.size(); ++k) {
                 CHECK(together[k].first == one_by_one[k].first);
@@ -471,13 +485,13 @@ TEST_CASE("make_tiles gives, format by format, exactly make_tile's bytes, on pix
             }
             // In the reverse order too: a format's bytes do not depend on what came before.
             const std::vector<Format> reversed(formats.rbegin(), formats.rend());
-            const auto backwards = layer->make_tiles(id, reversed);
+            const auto backwards = layer->make_tiles(layer->tile(id), reversed);
             REQUIRE(backwards.size() == together.size());
             for (std::size_t k = 0; k < backwards.size(); ++k) {
                 CHECK(backwards[k] == together[together.size() - 1 - k]);
             }
             made += together.size();
-            no_drc += layer->may_have_tile(id) &&
+            no_drc += layer->may_have_tile(layer->tile(id)) &&
                       std::none_of(together.begin(), together.end(), [](const auto& t) {
                           return t.first == Format::Drc;
                       });
@@ -486,7 +500,8 @@ TEST_CASE("make_tiles gives, format by format, exactly make_tile's bytes, on pix
         if (in.void_columns > 0) {
             CHECK(no_drc > 0);
         }
-        CHECK_THROWS_AS(layer->make_tiles({1, 0, 0}, std::vector<Format>{Format::Terrarium}),
-                        tb::InputError);
+        CHECK_THROWS_AS(
+            layer->make_tiles(layer->tile({1, 0, 0}), std::vector<Format>{Format::Terrarium}),
+            tb::InputError);
     }
 }

@@ -154,7 +154,8 @@ TEST_CASE("glb and drc tiles carry one unit-length, upward normal per decoded ve
         for (Format format : {Format::Glb, Format::Drc}) {
             const std::string fmt = format_name(format);
             CAPTURE(fmt);
-            const EcefTile t = to_ecef_tile(dem.layer->make_tile(id, format), format);
+            const EcefTile t =
+                to_ecef_tile(dem.layer->make_tile(dem.layer->tile(id), format), format);
             REQUIRE(t.positions.size() >= 4);
             REQUIRE(t.normals.size() == t.positions.size());
             // Area-weighted face normals (the cross product is twice the area times the unit
@@ -206,9 +207,10 @@ TEST_CASE("neighbouring tiles give a border vertex they share the same normal (g
             for (Format format : {Format::Glb, Format::Drc}) {
                 const std::string fmt = format_name(format);
                 CAPTURE(fmt);
-                const EcefTile a = to_ecef_tile(dem.layer->make_tile(dem.inner(), format), format);
-                const EcefTile b =
-                    to_ecef_tile(dem.layer->make_tile(dem.inner(dx, dy), format), format);
+                const EcefTile a = to_ecef_tile(
+                    dem.layer->make_tile(dem.layer->tile(dem.inner()), format), format);
+                const EcefTile b = to_ecef_tile(
+                    dem.layer->make_tile(dem.layer->tile(dem.inner(dx, dy)), format), format);
                 REQUIRE(a.normals.size() == a.positions.size());
                 REQUIRE(b.normals.size() == b.positions.size());
                 std::size_t shared = 0;
@@ -263,7 +265,7 @@ TEST_CASE("neighbouring tiles give a border vertex they share the same normal (g
 
 TEST_CASE("a glb declares one matte material and a Draco NORMAL accessor its primitive uses") {
     const Dem dem(4326, Scheme::Geodetic);
-    const std::string bytes = dem.layer->make_tile(dem.inner(), Format::Glb);
+    const std::string bytes = dem.layer->make_tile(dem.layer->tile(dem.inner()), Format::Glb);
     const DecodedTile d = decode_glb(bytes);
     const auto j = nlohmann::json::parse(d.json);
     REQUIRE(j["materials"].size() == 1);

@@ -365,7 +365,8 @@ TEST_CASE("every pixel of a mountain DEM under its finest and coarsest terrain t
                     const TileId id{z, x, y};
                     CAPTURE(id.x);
                     CAPTURE(id.y);
-                    const tb_qm::Tile t = tb_qm::read(layer.make_tile(id, tiler::Format::Terrain));
+                    const tb_qm::Tile t =
+                        tb_qm::read(layer.make_tile(layer.tile(id), tiler::Format::Terrain));
                     const double published = published_error(t);
                     if (layer.zoom_source(z) == tiler::ZoomSource::Pixels) {
                         CHECK(published <= layer.terrain_eps_for_zoom(z) * (1 + 1e-9));
@@ -406,8 +407,8 @@ TEST_CASE("neighbouring terrain tiles share their border vertices, heights and n
         std::map<std::pair<std::int64_t, std::int64_t>, std::array<Side, 4>> sides;
         for (std::int64_t y = r.y0 + 1; y < r.y1; ++y) {
             for (std::int64_t x = r.x0 + 1; x < r.x1; ++x) {
-                const tb_qm::Tile t =
-                    tb_qm::read(layer.make_tile(TileId{z, x, y}, tiler::Format::Terrain));
+                const tb_qm::Tile t = tb_qm::read(
+                    layer.make_tile(layer.tile(TileId{z, x, y}), tiler::Format::Terrain));
                 const tb_qm::Extension* normals = t.extension(1);
                 REQUIRE(normals != nullptr);
                 const double step = (static_cast<double>(t.max_height) - t.min_height) / 32767;
@@ -468,7 +469,7 @@ TEST_CASE("terrain tiles: zoom 0 meshed from the data where it lies and sea-leve
     const tiler::Layer& layer = *m->layer;
     for (const TileId id : {TileId{0, 0, 0}, TileId{0, 1, 0}}) {
         CAPTURE(id.x);
-        const tb_qm::Tile t = tb_qm::read(layer.make_tile(id, tiler::Format::Terrain));
+        const tb_qm::Tile t = tb_qm::read(layer.make_tile(layer.tile(id), tiler::Format::Terrain));
         const bool data = id.x == 0; // the west root holds the DEM (lon -72)
         // Filler lies on the geoid: EGM96 spans about -107..+86 m. The data reach far above.
         CHECK(t.min_height > -110);
@@ -483,10 +484,13 @@ TEST_CASE("terrain tiles: zoom 0 meshed from the data where it lies and sea-leve
         // The west root's children list the data's tiles.
         CHECK((meta.find("startX") != std::string::npos) == data);
     }
-    CHECK_THROWS_AS(layer.make_tile(TileId{layer.max_zoom() + 1, 0, 0}, tiler::Format::Terrain),
-                    NotFound);
-    CHECK_THROWS_AS(layer.make_tile(TileId{0, 2, 0}, tiler::Format::Terrain), InputError);
-    CHECK_THROWS_AS(layer.make_tile(TileId{3, 0, 8}, tiler::Format::Terrain), InputError);
+    CHECK_THROWS_AS(
+        layer.make_tile(layer.tile(TileId{layer.max_zoom() + 1, 0, 0}), tiler::Format::Terrain),
+        NotFound);
+    CHECK_THROWS_AS(layer.make_tile(layer.tile(TileId{0, 2, 0}), tiler::Format::Terrain),
+                    InputError);
+    CHECK_THROWS_AS(layer.make_tile(layer.tile(TileId{3, 0, 8}), tiler::Format::Terrain),
+                    InputError);
 }
 
 } // namespace

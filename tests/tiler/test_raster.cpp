@@ -469,7 +469,7 @@ TEST_CASE("the tile raster of N44W072.hgt matches GDAL's bilinear warp of the sa
     const auto layer = Layer::open(options);
     REQUIRE(layer->max_zoom() == 10);
     const TileId id{10, 617, 765}; // around 71.5 W 44.5 N, inside the cell
-    const TileRaster raster = layer->make_raster(id);
+    const TileRaster raster = layer->make_raster(layer->tile(id));
     REQUIRE(raster.grid.valid.empty());
 
     // gdalwarp -r bilinear -et 0 onto the tile's samples as pixel centres.
@@ -546,9 +546,9 @@ TEST_CASE("neighbouring tiles of N44W072.hgt share border samples and border ver
     const TileRange r = layer->tiles_at(z);
     const TileId a{z, r.x0 + 1, r.y0};
     const TileId east{z, a.x + 1, a.y}, north{z, a.x, a.y + 1}; // geodetic: y + 1 is north
-    const TileRaster ra = layer->make_raster(a);
-    const TileRaster re = layer->make_raster(east);
-    const TileRaster rn = layer->make_raster(north);
+    const TileRaster ra = layer->make_raster(layer->tile(a));
+    const TileRaster re = layer->make_raster(layer->tile(east));
+    const TileRaster rn = layer->make_raster(layer->tile(north));
     check_shared_border(ra, re, true);
     check_shared_border(ra, rn, false);
     const ErrorBudget budget = tile_error_budget(layer->eps_for_zoom(z), ra.scheme, z, ra.size);
@@ -573,9 +573,9 @@ TEST_CASE("tiles with voids on their shared border fill it identically (N46E008.
     // Walk a row of tiles through the middle of the cell until some shared borders hold voids.
     int borders_with_voids = 0;
     const std::int64_t y = (r.y0 + r.y1) / 2;
-    TileRaster previous = layer->make_raster({z, r.x0 + 1, y});
+    TileRaster previous = layer->make_raster(layer->tile({z, r.x0 + 1, y}));
     for (std::int64_t x = r.x0 + 2; x < r.x1 && borders_with_voids < 3; ++x) {
-        TileRaster next = layer->make_raster({z, x, y});
+        TileRaster next = layer->make_raster(layer->tile({z, x, y}));
         bool voids = false;
         for (int k = 0; k <= next.size; ++k) {
             voids = voids || !next.grid.is_valid(0, k);
@@ -712,9 +712,9 @@ TEST_CASE("overview zooms keep shared samples bit-identical across blocks and ti
         INFO("zoom " << z);
         const TileId a = centre_tile(z);
         const TileId east{z, a.x + 1, a.y}, north{z, a.x, a.y + 1}; // geodetic: y + 1 is north
-        const TileRaster ra = layer->make_raster(a);
-        check_shared_border(ra, layer->make_raster(east), true);
-        check_shared_border(ra, layer->make_raster(north), false);
+        const TileRaster ra = layer->make_raster(layer->tile(a));
+        check_shared_border(ra, layer->make_raster(layer->tile(east)), true);
+        check_shared_border(ra, layer->make_raster(layer->tile(north)), false);
     }
 }
 
@@ -755,7 +755,7 @@ TEST_CASE("an overview zoom's tile raster is the bilinear interpolation of the o
         };
 
         const TileId id = centre_tile(zoom.z);
-        const TileRaster raster = layer->make_raster(id);
+        const TileRaster raster = layer->make_raster(layer->tile(id));
         const std::int64_t c0 = tile_first_column(Scheme::Geodetic, id, 64);
         const std::int64_t r0 = tile_first_row(Scheme::Geodetic, id, 64);
         int checked = 0;

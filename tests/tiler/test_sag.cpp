@@ -149,9 +149,9 @@ TileId centre_tile(const Layer& layer, int z) {
 // What the layer draws at eps(z), checked against eps on every sample.
 Drawn check_layer_tile(const Layer& layer, const TileId& id) {
     const double eps = layer.eps_for_zoom(id.z);
-    const MeshedTile meshed = layer.mesh_tile_at(id, eps);
+    const MeshedTile meshed = layer.mesh_tile_at(layer.tile(id), eps);
     const TileRaster& raster = meshed.raster;
-    const Drawn got = measure_glb(layer.make_tile(id, Format::Glb), raster);
+    const Drawn got = measure_glb(layer.make_tile(layer.tile(id), Format::Glb), raster);
     const ErrorBudget& b = meshed.budget;
     MESSAGE("tile " << id.z << "/" << id.x << "/" << id.y << ": eps " << eps << " m, worst drawn "
                     << got.worst << " m over " << got.samples << " samples, " << got.triangles
@@ -184,7 +184,7 @@ TEST_CASE("flat ground without the sag budget (the old pipeline) draws below eps
     const auto layer = flat_layer(dir, 0.0, 10);
     const TileId id = centre_tile(*layer, 10);
     const double eps = layer->eps_for_zoom(10);
-    const TileRaster raster = layer->make_raster(id);
+    const TileRaster raster = layer->make_raster(layer->tile(id));
     ErrorBudget old = error_budget(eps);
     old.sag = 0;
     old.mesh_eps = eps - old.quant_error;

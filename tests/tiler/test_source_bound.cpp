@@ -80,7 +80,8 @@ Summary judge_zoom(const Layer& layer,
             CAPTURE(uri);
             const auto it = published.find(uri);
             REQUIRE(it != published.end());
-            const tb_oracle::Drawn d = tb_oracle::decode_glb(layer.make_tile(id, Format::Glb));
+            const tb_oracle::Drawn d =
+                tb_oracle::decode_glb(layer.make_tile(layer.tile(id), Format::Glb));
             const LonLatBox b = tile_bounds(layer.options().scheme, id);
             const tb_oracle::Verdict v =
                 tb_oracle::judge(d, pixels, b.west, b.south, b.east, b.north, drawn, reach);

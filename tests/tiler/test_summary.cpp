@@ -351,19 +351,22 @@ TEST_CASE("a layer keeps its summary in summary_dir, reads it back, and makes a 
     const TileRange r = first->tiles_at(4); // lattice steps of 13 pixels: read off the summary
     REQUIRE(r.count() == 1);
     const TileId id{4, r.x0, r.y0};
-    const std::string tile = first->make_tile(id, Format::Glb, {});
+    const auto make = [&id](const Layer& layer) {
+        return layer.make_tile(layer.tile(id), Format::Glb, {});
+    };
+    const std::string tile = make(*first);
     first.reset(); // its dataset closed, as a later run would find it
     REQUIRE(files().size() == 1);
     const auto kept = files().front();
     CHECK(kept.extension() == ".tbsum");
     const auto written = std::filesystem::last_write_time(kept);
     // A second layer reads the file (it is not written again) and makes the same tile.
-    CHECK(open()->make_tile(id, Format::Glb, {}) == tile);
+    CHECK(make(*open()) == tile);
     CHECK(std::filesystem::last_write_time(kept) == written);
     // The source changes: a new summary under a new name, and its tile follows the new heights.
     std::filesystem::remove(dem);
     rough_dem(dir, "valley.tif", 300);
-    CHECK(open()->make_tile(id, Format::Glb, {}) != tile);
+    CHECK(make(*open()) != tile);
     CHECK(files().size() == 2);
     // "off" keeps nothing.
     LayerOptions off;
@@ -371,7 +374,7 @@ TEST_CASE("a layer keeps its summary in summary_dir, reads it back, and makes a 
     off.summary_dir = "off";
     off.min_zoom = 0;
     std::filesystem::remove_all(cache);
-    Layer::open(off)->make_tile(id, Format::Glb, {});
+    make(*Layer::open(off));
     CHECK(files().empty());
 }
 

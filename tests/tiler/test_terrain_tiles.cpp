@@ -51,8 +51,8 @@ TEST_CASE("3D Tiles terrain of a mountain DEM: every pixel under the finest and 
                     const TileId id{z, x, y};
                     CAPTURE(id.x);
                     CAPTURE(id.y);
-                    const tb_terrain3d::Glb g =
-                        tb_terrain3d::read_glb(layer.make_tile(id, tiler::Format::Terrain3d));
+                    const tb_terrain3d::Glb g = tb_terrain3d::read_glb(
+                        layer.make_tile(layer.tile(id), tiler::Format::Terrain3d));
                     if (layer.zoom_source(z) == tiler::ZoomSource::Pixels) {
                         CHECK(g.published <= layer.terrain_eps_for_zoom(z) * (1 + 1e-9));
                     }
@@ -194,8 +194,8 @@ TEST_CASE("3D Tiles terrain subtrees list exactly the available tiles, with meta
                     CAPTURE(id.z);
                     CAPTURE(id.x);
                     CAPTURE(id.y);
-                    const tb_terrain3d::Glb g =
-                        tb_terrain3d::read_glb(layer.make_tile(id, tiler::Format::Terrain3d));
+                    const tb_terrain3d::Glb g = tb_terrain3d::read_glb(
+                        layer.make_tile(layer.tile(id), tiler::Format::Terrain3d));
                     for (const tb_oracle::V3& e : g.drawn.ecef) {
                         const double h = tb_oracle::geodetic(e)[2];
                         CHECK(h >= lo[k] - 0.01);
@@ -261,13 +261,16 @@ TEST_CASE("3D Tiles terrain: unknown subtrees and tiles outside the scheme or be
     const int past =
         (layer.max_zoom() / tiler::kTerrainSubtreeLevels + 1) * tiler::kTerrainSubtreeLevels;
     CHECK_FALSE(layer.document("terrain/0/" + std::to_string(past) + "/0/0.subtree", out));
-    CHECK_THROWS_AS(layer.make_tile(TileId{layer.max_zoom() + 1, 0, 0}, tiler::Format::Terrain3d),
-                    NotFound);
-    CHECK_THROWS_AS(layer.make_tile(TileId{0, 2, 0}, tiler::Format::Terrain3d), InputError);
-    CHECK_THROWS_AS(layer.make_tile(TileId{2, 0, 0}, tiler::Format::Terrain3d, {0}), InputError);
+    CHECK_THROWS_AS(
+        layer.make_tile(layer.tile(TileId{layer.max_zoom() + 1, 0, 0}), tiler::Format::Terrain3d),
+        NotFound);
+    CHECK_THROWS_AS(layer.make_tile(layer.tile(TileId{0, 2, 0}), tiler::Format::Terrain3d),
+                    InputError);
+    CHECK_THROWS_AS(layer.make_tile(layer.tile(TileId{2, 0, 0}), tiler::Format::Terrain3d, {0}),
+                    InputError);
     // Filler at zoom 0: flat on the geoid, no vertex outside its metadata's height range.
-    const tb_terrain3d::Glb g =
-        tb_terrain3d::read_glb(layer.make_tile(TileId{0, 1, 0}, tiler::Format::Terrain3d));
+    const tb_terrain3d::Glb g = tb_terrain3d::read_glb(
+        layer.make_tile(layer.tile(TileId{0, 1, 0}), tiler::Format::Terrain3d));
     CHECK(g.doc["asset"]["extras"]["filler"] == true);
     for (const tb_oracle::V3& e : g.drawn.ecef) {
         const double h = tb_oracle::geodetic(e)[2];

@@ -10,6 +10,7 @@
 
 #include <cmath>
 #include <map>
+#include <optional>
 #include <set>
 #include <string>
 
@@ -29,7 +30,8 @@ TilesetSpec make_spec(Scheme scheme, int min_zoom, int max_zoom, LonLatBox data,
     spec.min_height = -20;
     spec.max_height = 1900;
     spec.eps_for_zoom = [max_zoom, finest](int z) { return finest * std::exp2(max_zoom - z); };
-    spec.has_tile = [scheme, data](const TileId& id) {
+    spec.has_tile = [scheme, data](const ValidTile& tile) {
+        const TileId& id = tile.id();
         const TileRange r = tiles_covering(scheme, data, id.z);
         return !r.empty() && id.x >= r.x0 && id.x <= r.x1 && id.y >= r.y0 && id.y <= r.y1;
     };
@@ -111,10 +113,11 @@ void walk_tile(const TilesetSpec& spec,
             return;
         }
         const TileId id = parse_tile(uri, "glb");
-        CHECK(is_valid(spec.scheme, id));
+        const std::optional<ValidTile> valid = ValidTile::of(spec.scheme, id);
+        REQUIRE(valid);
         CHECK(id.z >= spec.min_zoom);
         CHECK(id.z <= spec.max_zoom);
-        CHECK(spec.has_tile(id));
+        CHECK(spec.has_tile(*valid));
         CHECK(ge >= spec.eps_for_zoom(id.z));
         CHECK(w.tiles.emplace(id, tile["boundingVolume"]).second); // listed once
     }
@@ -129,10 +132,8 @@ std::size_t count_layer_tiles(const TilesetSpec& spec) {
     std::size_t n = 0;
     for (int z = spec.min_zoom; z <= spec.max_zoom; ++z) {
         const TileRange r = tiles_covering(spec.scheme, spec.data_bounds, z);
-        for (std::int64_t y = r.y0; y <= r.y1; ++y) {
-            for (std::int64_t x = r.x0; x <= r.x1; ++x) {
-                n += spec.has_tile({z, x, y}) ? 1 : 0;
-            }
+        for (const ValidTile& tile : tiles_in(spec.scheme, r)) {
+            n += spec.has_tile(tile) ? 1 : 0;
         }
     }
     return n;

@@ -49,10 +49,6 @@ constexpr const char* kGlbMaterials =
     R"("materials":[{"name":"terrain","pbrMetallicRoughness":{"baseColorFactor":)"
     R"([0.5,0.46,0.4,1],"metallicFactor":0,"roughnessFactor":1}}],)";
 
-std::string tile_name(const TileId& id) {
-    return std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
-}
-
 void check(const draco::Status& status, const char* what, const TileId& id) {
     if (!status.ok()) {
         throw Error("tile " + tile_name(id) + ": Draco " + what + " failed: " +

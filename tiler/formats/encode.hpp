@@ -46,10 +46,10 @@ inline constexpr double kSagRadius = 6335439.0;
 inline constexpr double kSagMargin = 2.0;
 // The share of eps reserved for sag. A smaller share shortens the longest edge allowed (as the
 // square root of the share) and leaves the mesher more of eps everywhere else. Measured on the
-// SRTM cells of bench/ (tile_bench, build_bench; docs/performance.md, "The sag share"), a tenth against the
-// quarter it replaced: 3-22 % fewer triangles and bytes per tile and up to 27 % less time on
-// rough or mixed ground, and about the same (0.7 % more triangles) on flat ground at the finest
-// zoom, where the shorter edges bind.
+// SRTM cells of bench/ (tile_bench, build_bench; docs/performance.md, "The sag share"), a tenth
+// against the quarter it replaced: 3-22 % fewer triangles and bytes per tile and up to 27 % less
+// time on rough or mixed ground, and about the same (0.7 % more triangles) on flat ground at the
+// finest zoom, where the shorter edges bind.
 inline constexpr double kSagShare = 0.10;
 // Globe terrain (quantized-mesh and 3D Tiles terrain) keeps a quarter: its 15-bit lattice moves
 // every vertex across the slope by up to half a step (1.7 m on a zoom-8 tile), and on steep
@@ -168,13 +168,13 @@ struct TilesetSpec {
     LonLatBox data_bounds;
     double min_height = 0, max_height = 0; // ellipsoidal metres over the whole layer
     std::function<double(int)> eps_for_zoom;
-    std::function<bool(const TileId&)> has_tile; // exactly the tiles that make_tile produces
-    int tile_size = 256;                         // N: tile rasters are (N+1) x (N+1) samples
+    std::function<bool(const ValidTile&)> has_tile; // exactly the tiles make_tile produces
+    int tile_size = 256;                            // N: tile rasters are (N+1) x (N+1) samples
     // The budget of zoom z's tiles (quantization move and sag pad the regions); unset: the
     // lattice budget tile_error_budget(eps_for_zoom(z), scheme, z, tile_size).
     std::function<ErrorBudget(int)> budget_for_zoom;
     // A tile's geometricError; unset: the budget's drawn bound.
-    std::function<double(const TileId&)> error_for_tile;
+    std::function<double(const ValidTile&)> error_for_tile;
 };
 
 // The layer's documents, by path relative to the layer's URL root: "tileset.json" always,

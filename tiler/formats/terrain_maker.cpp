@@ -19,10 +19,6 @@ namespace {
 // height (4.7 m a step at zoom 6, hundreds of metres on a hemisphere at zoom 0).
 constexpr double kExactPositionsDegrees = 2.0;
 
-std::string tile_name(const TileId& id) {
-    return std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
-}
-
 // The ellipsoid's unit normal at lon/lat (degrees), ECEF.
 std::array<double, 3> up_vector(double lon, double lat) {
     constexpr double kDeg = 3.14159265358979323846 / 180;
@@ -130,8 +126,8 @@ TerrainTilesetSpec TerrainMaker::tileset_spec() const {
             plan_.terrain_budget_at(z, plan_.terrain_eps_for_zoom(z)).drawn_bound * std::exp2(z));
     }
     const double lo = spec.min_height, hi = spec.max_height;
-    spec.bounds = [lo, hi](const TileId& id) {
-        return terrain_tile_bounds(tile_bounds(Scheme::Geodetic, id), lo, hi);
+    spec.bounds = [lo, hi](const ValidTile& tile) {
+        return terrain_tile_bounds(tile_bounds(Scheme::Geodetic, tile.id()), lo, hi);
     };
     return spec;
 }
@@ -170,88 +166,85 @@ bool TerrainMaker::document(const std::string& path, std::string& out) const {
         spec, static_cast<int>(part[0]), static_cast<int>(part[1]), part[2], part[3], out);
 }
 
-TerrainDraft TerrainMaker::draft(const TileId& id) const {
+TerrainDraft TerrainMaker::draft(const ValidTile& tile) const {
     if (options_.scheme != Scheme::Geodetic) {
         throw InputError("layer '" + options_.name + "': globe terrain needs the geodetic scheme");
     }
-    if (!is_valid(options_.scheme, id)) {
-        throw InputError("tile " + tile_name(id) + ": outside the geodetic scheme (z 0.." +
-                         std::to_string(kMaxZoom) + ", x below 2^(z+1), y below 2^z)");
-    }
-    if (id.z > plan_.max_zoom()) {
-        throw NotFound("tile " + tile_name(id) + ": beyond layer '" + options_.name +
+    TB_ASSERT(tile.scheme() == options_.scheme);
+    if (tile.z() > plan_.max_zoom()) {
+        throw NotFound("tile " + tile_name(tile.id()) + ": beyond layer '" + options_.name +
                        "''s max zoom " + std::to_string(plan_.max_zoom()) +
                        " (clients upsample its parent)");
     }
-    const LonLatBox bounds = tile_bounds(options_.scheme, id);
-    if (plan_.terrain_has_data(id)) {
+    const LonLatBox bounds = tile_bounds(options_.scheme, tile.id());
+    if (plan_.terrain_has_data(tile)) {
         try {
-            return data_terrain(id, bounds);
+            return data_terrain(tile, bounds);
         } catch (const NotFound&) {
             // no source pixel centre lies in the tile: filler
         }
     }
     const TileMesh filler = terrain_filler(bounds);
     TerrainDraft draft;
-    TerrainTile& tile = draft.tile;
-    tile.filler = true;
-    tile.extras.normals.resize(filler.vertex_count());
+    TerrainTile& terrain = draft.tile;
+    terrain.filler = true;
+    terrain.extras.normals.resize(filler.vertex_count());
     for (std::size_t v = 0; v < filler.vertex_count(); ++v) {
-        tile.extras.normals[v] = up_vector(filler.x[v], filler.y[v]);
+        terrain.extras.normals[v] = up_vector(filler.x[v], filler.y[v]);
     }
-    tile.extras.water_mask = {255};
-    tile.extras.metadata = terrain_metadata(terrain_spec(), id, 0, true);
-    tile.mesh = quantize_mesh(filler, bounds);
-    tile.glb_error = filler_error(id);
+    terrain.extras.water_mask = {255};
+    terrain.extras.metadata = terrain_metadata(terrain_spec(), tile.id(), 0, true);
+    terrain.mesh = quantize_mesh(filler, bounds);
+    terrain.glb_error = filler_error(tile);
     // Float positions: a 16-bit step of a coarse filler tile's box is tens of metres.
-    tile.exact_positions = true;
+    terrain.exact_positions = true;
     return draft;
 }
 
-TerrainDraft TerrainMaker::data_terrain(const TileId& id, const LonLatBox& bounds) const {
+TerrainDraft TerrainMaker::data_terrain(const ValidTile& tile, const LonLatBox& bounds) const {
     // The 15-bit quantization moves vertices by up to half a step (about 1/65534 of the
     // tile) across the slope: it is measured at every sample, and where it takes the tile
     // past its bound the worst samples become vertices (quantize_within). The border lines
     // keep the vertices the zoom's eps gave them, so neighbouring tiles still share them.
-    const double eps = plan_.terrain_eps_for_zoom(id.z);
-    const double target = plan_.terrain_budget_at(id.z, eps).drawn_bound;
+    const double eps = plan_.terrain_eps_for_zoom(tile.z());
+    const double target = plan_.terrain_budget_at(tile.z(), eps).drawn_bound;
     TerrainDraft draft;
     MeshedTile& t = draft.meshed;
-    t = mesh_(id, eps); // quantize_within measures every valid sample
+    t = mesh_(tile, eps); // quantize_within measures every valid sample
     if (t.mesh.triangle_count() == 0) {
-        throw NotFound("tile " + tile_name(id) + ": no triangle from the DEM"); // filler
+        throw NotFound("tile " + tile_name(tile.id()) + ": no triangle from the DEM"); // filler
     }
     cover_rectangle(t.mesh, bounds);
-    TerrainTile& tile = draft.tile;
+    TerrainTile& terrain = draft.tile;
     std::size_t uncovered = 0;
     double error = 0;
-    tile.mesh = quantize_within(t.mesh,
-                                bounds,
-                                t.raster,
-                                t.source_pixels,
-                                target - t.budget.sag,
-                                error,
-                                &uncovered,
-                                t.cells);
+    terrain.mesh = quantize_within(t.mesh,
+                                   bounds,
+                                   t.raster,
+                                   t.source_pixels,
+                                   target - t.budget.sag,
+                                   error,
+                                   &uncovered,
+                                   t.cells);
     if (uncovered > 0) {
-        log::debug("tile " + tile_name(id) + ": " + std::to_string(uncovered) +
+        log::debug("tile " + tile_name(tile.id()) + ": " + std::to_string(uncovered) +
                    " sample(s) lie in no quantized triangle");
     }
     draft.quantized = error;
-    tile.error = std::max(error + t.budget.sag, target);
-    tile.extras.normals = normals(t, id);
+    terrain.error = std::max(error + t.budget.sag, target);
+    terrain.extras.normals = normals(t, tile);
     return draft;
 }
 
-std::string TerrainMaker::encode(TerrainDraft& draft, const TileId& id, Format format) const {
+std::string TerrainMaker::encode(TerrainDraft& draft, const ValidTile& tile, Format format) const {
     if (draft.tile.filler) {
         return format == Format::Terrain ? encode_quantized_mesh(draft.tile.mesh, draft.tile.extras)
                                          : encode_terrain_glb(draft.tile);
     }
     const MeshedTile& t = draft.meshed;
     const double target =
-        plan_.terrain_budget_at(id.z, plan_.terrain_eps_for_zoom(id.z)).drawn_bound;
-    TerrainTile& tile = draft.tile;
+        plan_.terrain_budget_at(tile.z(), plan_.terrain_eps_for_zoom(tile.z())).drawn_bound;
+    TerrainTile& terrain = draft.tile;
     double drawn = draft.quantized; // what the encoded format draws, at every sample
     if (format == Format::Terrain3d) {
         // 16-bit positions, unless they draw the tile further from the DEM than its bound
@@ -259,55 +252,56 @@ std::string TerrainMaker::encode(TerrainDraft& draft, const TileId& id, Format f
         // itself: the lattice's own error dominates there), or the tile is so wide that a
         // 16-bit step of its box moves heights at its far side by metres (the box is level
         // at the tile's centre).
-        const LonLatBox b = tile_bounds(options_.scheme, id);
-        tile.exact_positions = b.east - b.west > kExactPositionsDegrees;
+        const LonLatBox b = tile_bounds(options_.scheme, tile.id());
+        terrain.exact_positions = b.east - b.west > kExactPositionsDegrees;
         const auto measure = [&] {
-            return surface_error(terrain_glb_surface(tile.mesh, tile.exact_positions),
+            return surface_error(terrain_glb_surface(terrain.mesh, terrain.exact_positions),
                                  t.raster,
                                  t.source_pixels,
                                  nullptr,
                                  t.cells);
         };
         drawn = measure();
-        if (!tile.exact_positions &&
+        if (!terrain.exact_positions &&
             drawn > std::max(target - t.budget.sag, draft.quantized * 1.05) + 1e-9) {
-            tile.exact_positions = true;
+            terrain.exact_positions = true;
             drawn = measure();
         }
-        tile.glb_error = std::max(drawn + t.budget.sag, target);
+        terrain.glb_error = std::max(drawn + t.budget.sag, target);
     } else {
-        tile.extras.water_mask = terrain_water_mask(t.raster, tile_bounds(options_.scheme, id));
-        tile.extras.metadata = terrain_metadata(terrain_spec(), id, tile.error, false);
+        terrain.extras.water_mask =
+            terrain_water_mask(t.raster, tile_bounds(options_.scheme, tile.id()));
+        terrain.extras.metadata = terrain_metadata(terrain_spec(), tile.id(), terrain.error, false);
     }
     if (drawn + t.budget.sag > target + 1e-9) {
         // A zoom meshed on a lattice coarser than the pixels is expected to miss them by
         // more than eps (its bound is what it measures); at the pixels' own zoom only the
         // quantization can.
-        const bool pixels = plan_.zoom_source(id.z) == ZoomSource::Pixels;
+        const bool pixels = plan_.zoom_source(tile.z()) == ZoomSource::Pixels;
         log::write(pixels ? log::Level::Warn : log::Level::Debug,
-                   std::string("terrain tile ") + tile_name(id) + "." + extension(format) +
+                   std::string("terrain tile ") + tile_name(tile.id()) + "." + extension(format) +
                        (pixels ? ": quantization leaves it " : ": it is ") +
                        std::to_string(drawn + t.budget.sag) +
                        " m from the DEM, above the zoom's eps " + std::to_string(target) +
                        " m; the tile itself publishes the larger bound");
         note_over_eps_();
     }
-    return format == Format::Terrain ? encode_quantized_mesh(tile.mesh, tile.extras)
-                                     : encode_terrain_glb(tile);
+    return format == Format::Terrain ? encode_quantized_mesh(terrain.mesh, terrain.extras)
+                                     : encode_terrain_glb(terrain);
 }
 
-double TerrainMaker::filler_error(const TileId& id) const {
-    const LonLatBox b = tile_bounds(Scheme::Geodetic, id);
+double TerrainMaker::filler_error(const ValidTile& tile) const {
+    const LonLatBox b = tile_bounds(Scheme::Geodetic, tile.id());
     const bool over_data = b.west < plan_.footprint().east && b.east > plan_.footprint().west &&
                            b.south < plan_.footprint().north && b.north > plan_.footprint().south;
     return over_data ? plan_.relief() : 0.0;
 }
 
 std::vector<std::array<double, 3>> TerrainMaker::normals(const MeshedTile& t,
-                                                         const TileId& id) const {
-    const bool pixels = plan_.zoom_source(id.z) == ZoomSource::Pixels;
+                                                         const ValidTile& tile) const {
+    const bool pixels = plan_.zoom_source(tile.z()) == ZoomSource::Pixels;
     return vertex_normals(t.mesh,
-                          id,
+                          tile.id(),
                           options_.scheme,
                           options_.tile_size,
                           source_,

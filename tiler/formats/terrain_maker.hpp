@@ -30,7 +30,7 @@ class TerrainMaker {
 public:
     // A tile's globe terrain mesh at eps: drawn over its voids too, at the terrain's budget
     // (the layer's mesh_at; the raster's valid mask kept).
-    using MeshFn = std::function<MeshedTile(const TileId& id, double eps)>;
+    using MeshFn = std::function<MeshedTile(const ValidTile& tile, double eps)>;
     // Called once for each tile encoded above its zoom's bound (Layer::tiles_over_eps).
     using OverEpsFn = std::function<void()>;
 
@@ -51,22 +51,22 @@ public:
 
     // A globe terrain tile's content (tiler/formats/terrain_tiles.hpp): meshed from the DEM
     // where the layer has data, flat filler on the geoid elsewhere at zooms up to max_zoom
-    // (CesiumJS never asks for a tile whose parent is missing). InputError outside the geodetic
-    // scheme, NotFound beyond max zoom.
-    TerrainDraft draft(const TileId& id) const;
+    // (CesiumJS never asks for a tile whose parent is missing). The tile is of the layer's
+    // scheme (asserted); InputError when that is not the geodetic one, NotFound beyond max zoom.
+    TerrainDraft draft(const ValidTile& tile) const;
     // The draft encoded as `format` (terrain or terrain3d), with what only that format carries,
     // set on the draft itself: the water mask and metadata only quantized-mesh encodes, the
     // positions and bound only the glb does, so one draft serves both formats in either order.
     // The 3D Tiles glb's surface is measured at every sample: where its 16-bit positions would
     // take it past the bound, it carries float32 positions instead.
-    std::string encode(TerrainDraft& draft, const TileId& id, Format format) const;
+    std::string encode(TerrainDraft& draft, const ValidTile& tile, Format format) const;
 
 private:
-    TerrainDraft data_terrain(const TileId& id, const LonLatBox& bounds) const;
+    TerrainDraft data_terrain(const ValidTile& tile, const LonLatBox& bounds) const;
     // The bound a filler tile (on the geoid) publishes: the relief over the data, 0 where the
     // tile holds no source pixel.
-    double filler_error(const TileId& id) const;
-    std::vector<std::array<double, 3>> normals(const MeshedTile& t, const TileId& id) const;
+    double filler_error(const ValidTile& tile) const;
+    std::vector<std::array<double, 3>> normals(const MeshedTile& t, const ValidTile& tile) const;
 
     const LayerOptions& options_;
     const LayerPlan& plan_;

@@ -56,13 +56,18 @@ std::uint64_t morton(std::uint64_t x, std::uint64_t y) {
     return m;
 }
 
-bool available(const TerrainSpec& spec, int root, int level, std::int64_t x, std::int64_t y) {
-    TileId id;
-    if (!terrain_tile_id(root, level, x, y, id)) {
-        return false;
+// The available tile of implicit coordinates, or nullopt.
+std::optional<ValidTile>
+available(const TerrainSpec& spec, int root, int level, std::int64_t x, std::int64_t y) {
+    const std::optional<ValidTile> tile = terrain_tile_id(root, level, x, y);
+    if (!tile) {
+        return std::nullopt;
     }
     const TileRange r = terrain_available(spec, level);
-    return !r.empty() && id.x >= r.x0 && id.x <= r.x1 && id.y >= r.y0 && id.y <= r.y1;
+    if (r.empty() || tile->x() < r.x0 || tile->x() > r.x1 || tile->y() < r.y0 || tile->y() > r.y1) {
+        return std::nullopt;
+    }
+    return tile;
 }
 
 // The glb's position frame: an ENU frame at the tile's centre, scaled per axis so that the box
@@ -196,16 +201,16 @@ std::string bitstream_view_json(std::size_t offset, std::size_t length) {
 
 } // namespace
 
-bool terrain_tile_id(int root, int level, std::int64_t x, std::int64_t y, TileId& out) {
+std::optional<ValidTile>
+terrain_tile_id(std::int64_t root, std::int64_t level, std::int64_t x, std::int64_t y) {
     if (root < 0 || root > 1 || level < 0 || level > kMaxZoom) {
-        return false;
+        return std::nullopt; // before the shift and the narrowing to an int
     }
     const std::int64_t side = std::int64_t{1} << level;
-    if (x < 0 || y < 0 || x >= side || y >= side) {
-        return false;
+    if (x < 0 || x >= side) {
+        return std::nullopt; // the other root's column
     }
-    out = TileId{level, root * side + x, y};
-    return true;
+    return ValidTile::of(Scheme::Geodetic, TileId{static_cast<int>(level), root * side + x, y});
 }
 
 TerrainTileBounds terrain_tile_bounds(const LonLatBox& box, double min_height, double max_height) {
@@ -290,9 +295,8 @@ bool terrain_subtree(const TerrainTilesetSpec& spec,
                      std::int64_t y,
                      std::string& out) {
     const TerrainSpec& t = spec.terrain;
-    TileId probe;
     if (level % kTerrainSubtreeLevels != 0 || level > t.max_zoom ||
-        !terrain_tile_id(root, level, x, y, probe)) {
+        !terrain_tile_id(root, level, x, y)) {
         return false;
     }
     constexpr int kLevels = kTerrainSubtreeLevels;
@@ -303,15 +307,14 @@ bool terrain_subtree(const TerrainTilesetSpec& spec,
     for (int l = 0; l < kLevels && level + l <= t.max_zoom; ++l) {
         const std::int64_t side = std::int64_t{1} << l;
         const std::size_t offset = ((std::size_t{1} << (2 * l)) - 1) / 3;
-        std::vector<std::pair<std::uint64_t, TileId>> found;
+        std::vector<std::pair<std::uint64_t, ValidTile>> found;
         for (std::int64_t j = 0; j < side; ++j) {
             for (std::int64_t i = 0; i < side; ++i) {
                 const std::int64_t gx = x * side + i, gy = y * side + j;
-                if (available(t, root, level + l, gx, gy)) {
-                    TileId id;
-                    terrain_tile_id(root, level + l, gx, gy, id);
+                if (const std::optional<ValidTile> tile = available(t, root, level + l, gx, gy)) {
                     found.emplace_back(
-                        morton(static_cast<std::uint64_t>(i), static_cast<std::uint64_t>(j)), id);
+                        morton(static_cast<std::uint64_t>(i), static_cast<std::uint64_t>(j)),
+                        *tile);
                 }
             }
         }

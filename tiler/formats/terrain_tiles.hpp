@@ -20,6 +20,7 @@
 #include <array>
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -62,8 +63,8 @@ struct TerrainTilesetSpec {
     TerrainSpec terrain;   // availability: terrain_available(terrain, z)
     double min_height = 0; // over every tile, ellipsoidal metres
     double max_height = 0;
-    // The metadata of an available tile (geodetic id).
-    std::function<TerrainTileBounds(const TileId&)> bounds;
+    // The metadata of an available tile (a geodetic one).
+    std::function<TerrainTileBounds(const ValidTile&)> bounds;
     // Level 0's geometricError; level z's is this / 2^z: at least the bound every tile of level
     // z is held to (flat filler below the meshed zooms: the DEM's relief).
     double root_error = 0;
@@ -72,9 +73,10 @@ struct TerrainTilesetSpec {
 // tileset.json (3D Tiles 1.1): the metadata schema, then a root holding the two implicit roots.
 std::string terrain_tileset_json(const TerrainTilesetSpec& spec);
 
-// The geodetic tile of implicit coordinates (root, level, x, y); false when they are outside
-// the root's quadtree.
-bool terrain_tile_id(int root, int level, std::int64_t x, std::int64_t y, TileId& out);
+// The geodetic tile of implicit coordinates (root, level, x, y); nullopt when they are outside
+// the root's quadtree (root 0 or 1, level 0..kMaxZoom, x and y below 2^level).
+std::optional<ValidTile>
+terrain_tile_id(std::int64_t root, std::int64_t level, std::int64_t x, std::int64_t y);
 
 // The binary subtree file ("subt", version 1) rooted at implicit (root, level, x, y): tile and
 // content availability (the same: every available tile has a glb), child subtree availability,

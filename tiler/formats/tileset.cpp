@@ -23,6 +23,7 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <optional>
 #include <vector>
 
 namespace tb::tiler {
@@ -46,9 +47,9 @@ ErrorBudget zoom_budget(const TilesetSpec& spec, int z) {
                : tile_error_budget(spec.eps_for_zoom(z), spec.scheme, z, spec.tile_size);
 }
 
-Region tile_region(const TilesetSpec& spec, const TileId& id) {
-    const LonLatBox b = tile_bounds(spec.scheme, id);
-    const ErrorBudget budget = zoom_budget(spec, id.z);
+Region tile_region(const TilesetSpec& spec, const ValidTile& tile) {
+    const LonLatBox b = tile_bounds(spec.scheme, tile.id());
+    const ErrorBudget budget = zoom_budget(spec, tile.z());
     // Snapping moves a vertex by at most s*sqrt(3)/2 <= s in any direction; straight
     // triangles, no edge longer than max_edge_m, sag below their vertices by at most
     // budget.sag.
@@ -69,8 +70,9 @@ Region tile_region(const TilesetSpec& spec, const TileId& id) {
 
 // The honest bound of what clients draw: eps(z) itself, chord sag being inside its budget
 // (except at zooms so coarse that one sample step sags by most of eps: then that sag counts).
-double tile_error(const TilesetSpec& spec, const TileId& id) {
-    return spec.error_for_tile ? spec.error_for_tile(id) : zoom_budget(spec, id.z).drawn_bound;
+double tile_error(const TilesetSpec& spec, const ValidTile& tile) {
+    return spec.error_for_tile ? spec.error_for_tile(tile)
+                               : zoom_budget(spec, tile.z()).drawn_bound;
 }
 
 std::string region_json(const Region& r) {
@@ -78,19 +80,16 @@ std::string region_json(const Region& r) {
            number(r.north) + "," + number(r.min_h) + "," + number(r.max_h) + "]}";
 }
 
-std::vector<TileId> children(const TilesetSpec& spec, const TileId& id) {
-    std::vector<TileId> out;
-    if (id.z >= spec.max_zoom) {
+std::vector<ValidTile> children(const TilesetSpec& spec, const ValidTile& tile) {
+    std::vector<ValidTile> out;
+    if (tile.z() >= spec.max_zoom) {
         return out;
     }
     // Order: south-west, south-east, north-west, north-east in the scheme's own y direction;
     // deterministic either way.
-    for (std::int64_t dy = 0; dy < 2; ++dy) {
-        for (std::int64_t dx = 0; dx < 2; ++dx) {
-            const TileId c{id.z + 1, 2 * id.x + dx, 2 * id.y + dy};
-            if (is_valid(spec.scheme, c) && spec.has_tile(c)) {
-                out.push_back(c);
-            }
+    for (const ValidTile& c : tile.children()) {
+        if (spec.has_tile(c)) {
+            out.push_back(c);
         }
     }
     return out;
@@ -104,21 +103,25 @@ bool starts_document(const TilesetSpec& spec, int z) {
 
 // Appends tile `id` (with content) and its subtree down to the next document boundary.
 // `up` is the prefix from the current document's directory back to the layer root.
-void write_tile(const TilesetSpec& spec, const TileId& id, const std::string& up, std::string& j) {
-    j += R"({"boundingVolume":)" + region_json(tile_region(spec, id));
-    j += R"(,"geometricError":)" + number(tile_error(spec, id));
-    j += R"(,"refine":"REPLACE","content":{"uri":")" + up + tile_path(id) + ".glb\"}";
-    const std::vector<TileId> kids = children(spec, id);
+void write_tile(const TilesetSpec& spec,
+                const ValidTile& tile,
+                const std::string& up,
+                std::string& j) {
+    j += R"({"boundingVolume":)" + region_json(tile_region(spec, tile));
+    j += R"(,"geometricError":)" + number(tile_error(spec, tile));
+    j += R"(,"refine":"REPLACE","content":{"uri":")" + up + tile_path(tile.id()) + ".glb\"}";
+    const std::vector<ValidTile> kids = children(spec, tile);
     if (!kids.empty()) {
         j += R"(,"children":[)";
         for (std::size_t k = 0; k < kids.size(); ++k) {
             if (k > 0) {
                 j += ",";
             }
-            if (starts_document(spec, kids[k].z)) {
+            if (starts_document(spec, kids[k].z())) {
                 j += R"({"boundingVolume":)" + region_json(tile_region(spec, kids[k]));
                 j += R"(,"geometricError":)" + number(tile_error(spec, kids[k]));
-                j += R"(,"content":{"uri":")" + up + "tilesets/" + tile_path(kids[k]) + ".json\"}}";
+                j += R"(,"content":{"uri":")" + up + "tilesets/" + tile_path(kids[k].id()) +
+                     ".json\"}}";
             } else {
                 write_tile(spec, kids[k], up, j);
             }
@@ -138,29 +141,32 @@ std::string document(double geometric_error, const std::string& root) {
            number(geometric_error) + R"(,"root":)" + root + "}\n";
 }
 
-bool parse_id(const std::string& text, TileId& id) {
-    // "{z}/{x}/{y}" with plain decimal numbers.
+// The tile of spec's scheme a path names: "{z}/{x}/{y}" with plain decimal numbers.
+std::optional<ValidTile> parse_tile(const TilesetSpec& spec, const std::string& text) {
     std::int64_t parts[3];
     const char* p = text.data();
     const char* end = text.data() + text.size();
     for (int k = 0; k < 3; ++k) {
         const auto r = std::from_chars(p, end, parts[k]);
         if (r.ec != std::errc() || r.ptr == p) {
-            return false;
+            return std::nullopt;
         }
         p = r.ptr;
         if (k < 2) {
             if (p == end || *p != '/') {
-                return false;
+                return std::nullopt;
             }
             ++p;
         }
     }
     if (p != end || parts[0] < 0 || parts[0] > kMaxZoom) {
-        return false;
+        return std::nullopt; // before narrowing z to an int
     }
-    id = TileId{static_cast<int>(parts[0]), parts[1], parts[2]};
-    return tile_path(id) == text; // canonical only: no leading zeros or signs
+    const TileId id{static_cast<int>(parts[0]), parts[1], parts[2]};
+    if (tile_path(id) != text) {
+        return std::nullopt; // canonical only: no leading zeros or signs
+    }
+    return ValidTile::of(spec.scheme, id);
 }
 
 } // namespace
@@ -169,14 +175,11 @@ bool tileset_document(const TilesetSpec& spec, const std::string& path, std::str
     TB_ASSERT(spec.min_zoom >= 0 && spec.min_zoom <= spec.max_zoom && spec.max_zoom <= kMaxZoom);
     TB_ASSERT(spec.eps_for_zoom && spec.has_tile);
     if (path == "tileset.json") {
-        std::vector<TileId> tops;
+        std::vector<ValidTile> tops;
         const TileRange range = tiles_covering(spec.scheme, spec.data_bounds, spec.min_zoom);
-        for (std::int64_t y = range.y0; y <= range.y1; ++y) {
-            for (std::int64_t x = range.x0; x <= range.x1; ++x) {
-                const TileId id{spec.min_zoom, x, y};
-                if (spec.has_tile(id)) {
-                    tops.push_back(id);
-                }
+        for (const ValidTile& tile : tiles_in(spec.scheme, range)) {
+            if (spec.has_tile(tile)) {
+                tops.push_back(tile);
             }
         }
         // The virtual root: the union of its children's regions, no content.
@@ -227,15 +230,15 @@ bool tileset_document(const TilesetSpec& spec, const std::string& path, std::str
         !path.ends_with(kSuffix)) {
         return false;
     }
-    TileId id;
-    if (!parse_id(path.substr(kPrefix.size(), path.size() - kPrefix.size() - kSuffix.size()), id) ||
-        !is_valid(spec.scheme, id) || id.z > spec.max_zoom || !starts_document(spec, id.z) ||
-        !spec.has_tile(id)) {
+    const std::optional<ValidTile> tile = parse_tile(
+        spec, path.substr(kPrefix.size(), path.size() - kPrefix.size() - kSuffix.size()));
+    if (!tile || tile->z() > spec.max_zoom || !starts_document(spec, tile->z()) ||
+        !spec.has_tile(*tile)) {
         return false;
     }
     std::string root;
-    write_tile(spec, id, "../../../", root);
-    out = document(2 * tile_error(spec, id), root);
+    write_tile(spec, *tile, "../../../", root);
+    out = document(2 * tile_error(spec, *tile), root);
     return true;
 }
 

@@ -27,10 +27,6 @@ constexpr int kFillMargin = 16;
 // along segments no longer than that, stays within max_edge; core needs at least kMinMaxEdge.
 const double kMinPixelEdge = std::sqrt(core::kMinMaxEdge * core::kMinMaxEdge + 1);
 
-std::string tile_name(const TileId& id) {
-    return std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
-}
-
 // First index whose coordinate is at or past `edge` going the grid's way (x grows with i, y
 // shrinks with j), by exact comparison with the coordinate each pixel centre has everywhere.
 template <class Coord, class Past>

@@ -46,10 +46,6 @@ std::string shard_document(const ShardSpec& s) {
     return "build-shards/" + std::to_string(s.index) + "-of-" + std::to_string(s.count) + ".json";
 }
 
-std::string tile_name(const TileId& id) {
-    return std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
-}
-
 // The build manifest: what decides the tiles' bytes (tiler/stores/manifest.hpp), then what
 // decides which tiles there are.
 Manifest make_manifest(const BuildOptions& o, const Layer& layer, int shard_count) {
@@ -162,20 +158,18 @@ private:
 // ---- the fixed tile order: zoom ascending, then rows (y), then columns (x) ----
 
 struct Plan {
-    std::vector<TileRange> ranges;     // one per zoom, possibly empty
+    std::vector<TileRange> ranges;     // one per zoom and pyramid, none empty
+    std::vector<Scheme> schemes;       // each range's scheme
     std::vector<std::int64_t> offsets; // index of each range's first tile
     std::int64_t total = 0;
     std::int64_t mesh_total = 0; // tiles before this index are mesh tiles, the rest DEM tiles
 
     bool dem(std::int64_t i) const { return i >= mesh_total; }
 
-    TileId at(std::int64_t i) const {
+    ValidTile at(std::int64_t i) const {
         const auto k = static_cast<std::size_t>(
             std::upper_bound(offsets.begin(), offsets.end(), i) - offsets.begin() - 1);
-        const TileRange& r = ranges[k];
-        const std::int64_t local = i - offsets[k];
-        const std::int64_t width = r.x1 - r.x0 + 1;
-        return TileId{r.z, r.x0 + local % width, r.y0 + local / width};
+        return ValidTile::in_range(schemes[k], ranges[k], i - offsets[k]);
     }
 };
 
@@ -202,6 +196,7 @@ void add_ranges(Plan& plan,
         }
         plan.offsets.push_back(plan.total);
         plan.ranges.push_back(r);
+        plan.schemes.push_back(scheme);
         plan.total += r.count();
     }
 }
@@ -225,8 +220,8 @@ TerrainSpec terrain_spec_of(const Layer& layer) {
 
 // Whether tile id is made in format f: DEM and terrain tiles wherever planned, mesh tiles where
 // the layer may have data.
-bool makes(const Layer& layer, Format f, const TileId& id) {
-    return is_dem_format(f) || is_terrain_format(f) || layer.may_have_tile(id);
+bool makes(const Layer& layer, Format f, const ValidTile& tile) {
+    return is_dem_format(f) || is_terrain_format(f) || layer.may_have_tile(tile);
 }
 
 // Whether every terrain tile of `format` that layer.json and the terrain tileset list as
@@ -283,7 +278,8 @@ void write_static_hosting(const BuildOptions& o,
                           const std::string& name) {
     for (Format f : o.formats) {
         if (is_dem_format(f) && !o.bbox) {
-            store.put_document(name, dem_tilejson_name(f), static_dem_tilejson(layer, f, o.base_url));
+            store.put_document(
+                name, dem_tilejson_name(f), static_dem_tilejson(layer, f, o.base_url));
             log::info("build: wrote " + dem_tilejson_name(f) + " (" + format_name(f) +
                       " DEM tiles" +
                       (o.base_url.empty() ? ", tile URLs relative to it; MapLibre needs absolute "
@@ -869,7 +865,7 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
         summary.planned = plan.total;
     } else {
         for (std::int64_t i = 0; i < plan.total; ++i) {
-            summary.planned += mine(plan.at(i)) ? 1 : 0;
+            summary.planned += mine(plan.at(i).id()) ? 1 : 0;
         }
     }
     const int threads = o.threads > 0 ? o.threads : usable_cpus();
@@ -898,19 +894,20 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
                 if (i >= plan.total) {
                     return;
                 }
-                const TileId id = plan.at(i);
+                const ValidTile tile = plan.at(i);
+                const TileId& id = tile.id();
                 const bool dem = plan.dem(i);
                 if (!mine(id)) {
                     continue;
                 }
-                if (!dem && !layer->may_have_tile(id) && !wants_terrain(*layer, o)) {
+                if (!dem && !layer->may_have_tile(tile) && !wants_terrain(*layer, o)) {
                     ++counters.empty;
                     continue;
                 }
                 if (check_present) {
                     bool all = true;
                     for (Format f : o.formats) {
-                        if (is_dem_format(f) == dem && makes(*layer, f, id)) {
+                        if (is_dem_format(f) == dem && makes(*layer, f, tile)) {
                             all = all && store->contains(TileKey{name, id, f, -1});
                         }
                     }
@@ -923,21 +920,21 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
                 try {
                     std::vector<Format> formats;
                     for (Format f : o.formats) {
-                        if (is_dem_format(f) == dem && makes(*layer, f, id)) {
+                        if (is_dem_format(f) == dem && makes(*layer, f, tile)) {
                             formats.push_back(f);
                         }
                     }
                     if (dem) {
                         for (Format f : formats) {
                             try {
-                                made.tiles.emplace_back(f, make_dem_tile(*layer, id, f));
+                                made.tiles.emplace_back(f, make_dem_tile(*layer, tile, f));
                             } catch (const NotFound&) {
                                 // no data for this format here; the others may have some
                             }
                         }
                     } else {
                         // Formats without data here are left out; the others share meshes.
-                        made.tiles = layer->make_tiles(id, formats);
+                        made.tiles = layer->make_tiles(tile, formats);
                         keep_terrain_extensions(made, o.terrain_extensions);
                     }
                     if (made.tiles.empty()) {

@@ -46,10 +46,6 @@ constexpr double kTerrainCoarseShare = 0.5;
 // The largest share of eps globe terrain keeps for sag (terrain_budget_at).
 constexpr double kTerrainSagMost = 0.75;
 
-std::string tile_name(const TileId& id) {
-    return std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
-}
-
 } // namespace
 
 LayerPlan::LayerPlan(const LayerOptions& options, const DemSource& source)
@@ -116,39 +112,35 @@ TileRange LayerPlan::tiles_at(int z) const {
     return tiles_covering(options_.scheme, footprint_, z);
 }
 
-bool LayerPlan::may_have_tile(const TileId& id) const {
-    if (!is_valid(options_.scheme, id)) {
-        return false;
-    }
-    const TileRange r = tiles_at(id.z);
-    return !r.empty() && id.x >= r.x0 && id.x <= r.x1 && id.y >= r.y0 && id.y <= r.y1;
+bool LayerPlan::may_have_tile(const ValidTile& tile) const {
+    TB_ASSERT(tile.scheme() == options_.scheme);
+    const TileRange r = tiles_at(tile.z());
+    return !r.empty() && tile.x() >= r.x0 && tile.x() <= r.x1 && tile.y() >= r.y0 &&
+           tile.y() <= r.y1;
 }
 
-void LayerPlan::check_id(const TileId& id) const {
-    if (!is_valid(options_.scheme, id)) {
-        throw InputError("tile " + tile_name(id) + ": outside the " + to_string(options_.scheme) +
-                         " scheme (z 0.." + std::to_string(kMaxZoom) +
-                         ", x and y within the zoom's tiles)");
-    }
-    if (!may_have_tile(id)) {
-        throw NotFound("tile " + tile_name(id) + ": layer '" + options_.name +
+void LayerPlan::check_data(const ValidTile& tile) const {
+    if (!may_have_tile(tile)) {
+        throw NotFound("tile " + tile_name(tile.id()) + ": layer '" + options_.name +
                        "' has no data there (zooms " + std::to_string(min_zoom_) + ".." +
                        std::to_string(max_zoom_) + ")");
     }
 }
 
-bool LayerPlan::terrain_has_data(const TileId& id) const {
-    if (!is_valid(options_.scheme, id) || id.z < terrain_min_zoom_ || id.z > max_zoom_) {
+bool LayerPlan::terrain_has_data(const ValidTile& tile) const {
+    TB_ASSERT(tile.scheme() == options_.scheme);
+    if (tile.z() < terrain_min_zoom_ || tile.z() > max_zoom_) {
         return false;
     }
-    const TileRange r = tiles_covering(options_.scheme, footprint_, id.z);
-    return !r.empty() && id.x >= r.x0 && id.x <= r.x1 && id.y >= r.y0 && id.y <= r.y1;
+    const TileRange r = tiles_covering(options_.scheme, footprint_, tile.z());
+    return !r.empty() && tile.x() >= r.x0 && tile.x() <= r.x1 && tile.y() >= r.y0 &&
+           tile.y() <= r.y1;
 }
 
-void LayerPlan::check_terrain_id(const TileId& id) const {
-    if (!terrain_has_data(id)) {
-        check_id(id); // names the problem
-        throw NotFound("tile " + tile_name(id) + ": no globe terrain data there");
+void LayerPlan::check_terrain_data(const ValidTile& tile) const {
+    if (!terrain_has_data(tile)) {
+        check_data(tile); // names the layer's zooms
+        throw NotFound("tile " + tile_name(tile.id()) + ": no globe terrain data there");
     }
 }
 

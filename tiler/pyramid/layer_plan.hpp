@@ -40,15 +40,15 @@ public:
     double terrain_eps_for_zoom(int z) const;
     ZoomSource zoom_source(int z) const;
 
-    // Layer::tiles_at and Layer::may_have_tile.
+    // Layer::tiles_at and Layer::may_have_tile. Tiles are of the layer's scheme (asserted).
     TileRange tiles_at(int z) const;
-    bool may_have_tile(const TileId& id) const;
-    // Throws InputError for an id outside the scheme, NotFound for a tile with no data.
-    void check_id(const TileId& id) const;
+    bool may_have_tile(const ValidTile& tile) const;
+    // Throws NotFound, naming the layer's zooms, for a tile with no data.
+    void check_data(const ValidTile& tile) const;
     // Whether a globe terrain tile is meshed from the data (else filler on the geoid).
-    bool terrain_has_data(const TileId& id) const;
-    // check_id for a globe terrain tile meshed from the data.
-    void check_terrain_id(const TileId& id) const;
+    bool terrain_has_data(const ValidTile& tile) const;
+    // check_data for a globe terrain tile meshed from the data.
+    void check_terrain_data(const ValidTile& tile) const;
 
     // The error budget of zoom z's tiles at eps: in source pixels for pixel tiles, in lattice
     // samples otherwise (the longest edge must be the same for every tile of a zoom).
