@@ -16,12 +16,14 @@
 # 1), TIMEOUT (seconds per build, default 1800), CTB_NATIVE=1 (also ctb to its own finest zoom),
 # STEPS (default "build stats tiles"; "stats tiles" judges the pyramids a previous run left in
 # $RUNS), TILES=0 (no cold tiles), POINT (lon,lat of the cold tiles, default the DEM's centre),
-# GEOID (default /usr/share/proj/egm96_15.gtx). Needs gdal-bin, node, python3, /usr/bin/time.
+# GEOID (default /usr/share/proj/egm96_15.gtx), CTB_NORMALS=1 (ctb also writes vertex normals,
+# -N; by default it does not, as Terrabound's static tiles carry no normals: only its metadata
+# extension). Both store their tiles gzip-compressed. Needs gdal-bin, node, python3, /usr/bin/time.
 # Prints TSV lines on stdout, the first field saying what the line is; logs go to $RUNS.
 set -euo pipefail
 
 if [[ $# -lt 1 || $# -gt 2 ]]; then
-    sed -n '2,21p' "$0" >&2
+    sed -n '2,23p' "$0" >&2
     exit 2
 fi
 TB=$(realpath "$1")
@@ -37,6 +39,9 @@ TILES=${TILES:-1}
 STEPS=" ${STEPS:-build stats tiles} "
 GEOID=${GEOID:-/usr/share/proj/egm96_15.gtx}
 CTB_NATIVE=${CTB_NATIVE:-0}
+CTB_NORMALS=${CTB_NORMALS:-0}
+CTB_FLAGS=(-f Mesh -C)
+[[ $CTB_NORMALS == 1 ]] && CTB_FLAGS+=(-N)
 for tool in gdalinfo gdal_translate node python3 /usr/bin/time "$CTB"; do
     command -v "$tool" >/dev/null || { echo "ctb_bench: $tool not found" >&2; exit 2; }
 done
@@ -99,9 +104,9 @@ build_ctb() {
     rm -rf "$out"
     mkdir -p "$out"
     before=$(load1)
-    run "$W/$label-build.log" "$W/$label-build.time" "$CTB" -f Mesh -C -N -c "$THREADS" \
+    run "$W/$label-build.log" "$W/$label-build.time" "$CTB" "${CTB_FLAGS[@]}" -c "$THREADS" \
         ${start:+-s "$start"} -e 0 -o "$out" "$DEM" || rc=$?
-    "$CTB" -q -f Mesh -C -N ${start:+-s "$start"} -e 0 -l -o "$out" "$DEM" >/dev/null 2>&1 || true
+    "$CTB" -q "${CTB_FLAGS[@]}" ${start:+-s "$start"} -e 0 -l -o "$out" "$DEM" >/dev/null 2>&1 || true
     report "$label" "$W/$label-build.time" "$(count "$out")" "$before" "$rc" "$rep"
 }
 report() { # label timefile tiles load_before rc rep
@@ -137,7 +142,7 @@ stats terrabound "$TB_OUT/terrain" --geoid "$GEOID"
 stats ctb "$CTB_OUT"
 if [[ $CTB_NATIVE == 1 && -d $W/ctb-native ]]; then stats ctb-native "$W/ctb-native"; fi
 
-# Totals over the same zooms (the gzip -6 bytes of every tile).
+# Totals over the same zooms (the gzip -6 bytes of every tile; on disk both store gzip).
 printf 'total\tlabel\ttiles\tgzip_kb\tbytes_on_disk_kb\n'
 for pair in "terrabound:$TB_OUT/terrain" "ctb:$CTB_OUT"; do
     label=${pair%%:*} dir=${pair#*:}
