@@ -9,6 +9,7 @@
 
 #include "core/error.hpp"
 #include "core/predicates.hpp"
+#include "core/radix_sort.hpp"
 #include "core/triangulate.hpp"
 #include "core/two_threads.hpp"
 
@@ -164,6 +165,47 @@ std::vector<int> fit_breakpoints(std::span<const float> z,
     return out;
 }
 
+std::vector<int> greedy_breakpoints(std::span<const float> z,
+                                    std::span<const std::uint8_t> valid,
+                                    double eps,
+                                    int max_step) {
+    const int n = static_cast<int>(z.size());
+    TB_ASSERT(n >= 2 && max_step >= 0 && eps > 0.0);
+    TB_ASSERT(valid.empty() || valid.size() == z.size());
+    const int reach = max_step > 0 ? max_step : n;
+    std::vector<int> out{0};
+    for (int i = 0; i < n - 1;) {
+        const double zi = z[static_cast<std::size_t>(i)];
+        const int last = static_cast<int>(std::min<std::int64_t>(std::int64_t{i} + reach, n - 1));
+        // The tunnel's slope window [lo_num / lo_run, hi_num / hi_run] over the valid samples
+        // passed so far (runs > 0); open while lo <= hi.
+        double lo_num = -1.0, lo_run = 0.0, hi_num = 1.0, hi_run = 0.0;
+        int best = i + 1;
+        for (int j = i + 1; j <= last; ++j) {
+            const double run = j - i;
+            const double rise = static_cast<double>(z[static_cast<std::size_t>(j)]) - zi;
+            // slope = rise / run, tested against the window of the samples strictly between.
+            if (rise * lo_run >= lo_num * run && rise * hi_run <= hi_num * run) {
+                best = j;
+            }
+            if (is_valid(valid, j)) {
+                if ((rise - eps) * lo_run > lo_num * run) {
+                    lo_num = rise - eps, lo_run = run;
+                }
+                if ((rise + eps) * hi_run < hi_num * run) {
+                    hi_num = rise + eps, hi_run = run;
+                }
+                if (lo_num * hi_run > hi_num * lo_run) {
+                    break;
+                }
+            }
+        }
+        out.push_back(best);
+        i = best;
+    }
+    return out;
+}
+
 std::vector<int> border_breakpoints(const HeightGrid& grid, double eps, int side, int max_step) {
     const int w = grid.width;
     const int h = grid.height;
@@ -187,7 +229,18 @@ std::vector<int> border_breakpoints(const HeightGrid& grid, double eps, int side
 
 namespace {
 
-std::vector<int> column_breakpoints(const HeightGrid& grid, double eps, int x, int max_step) {
+// The fit of a scan line: fit_breakpoints, or greedy_breakpoints when greedy.
+std::vector<int> line_fit(std::span<const float> z,
+                          std::span<const std::uint8_t> valid,
+                          double eps,
+                          int max_step,
+                          bool greedy) {
+    return greedy ? greedy_breakpoints(z, valid, eps, max_step)
+                  : fit_breakpoints(z, valid, eps, max_step);
+}
+
+std::vector<int>
+column_breakpoints(const HeightGrid& grid, double eps, int x, int max_step, bool greedy) {
     std::vector<float> z(static_cast<std::size_t>(grid.height));
     std::vector<std::uint8_t> valid;
     if (!grid.valid.empty()) {
@@ -199,10 +252,11 @@ std::vector<int> column_breakpoints(const HeightGrid& grid, double eps, int x, i
             valid[static_cast<std::size_t>(y)] = grid.is_valid(x, y) ? 1 : 0;
         }
     }
-    return fit_breakpoints(z, valid, eps, max_step);
+    return line_fit(z, valid, eps, max_step, greedy);
 }
 
-std::vector<int> row_breakpoints(const HeightGrid& grid, double eps, int y, int max_step) {
+std::vector<int>
+row_breakpoints(const HeightGrid& grid, double eps, int y, int max_step, bool greedy) {
     const auto first = grid.heights.begin() + static_cast<std::ptrdiff_t>(y) * grid.width;
     std::span<const float> z(&*first, static_cast<std::size_t>(grid.width));
     std::span<const std::uint8_t> valid;
@@ -211,24 +265,26 @@ std::vector<int> row_breakpoints(const HeightGrid& grid, double eps, int y, int 
                                                   static_cast<std::size_t>(y) * grid.width,
                                               static_cast<std::size_t>(grid.width));
     }
-    return fit_breakpoints(z, valid, eps, max_step);
+    return line_fit(z, valid, eps, max_step, greedy);
 }
 
 // The interior breakpoints of scan lines (column x for {true, x}, row y for {false, y}) appended
-// to pts; with threads = 2 the lines' two halves are fitted on two threads. Only a scan line's
+// to pts (greedy: greedy_breakpoints' chains); with threads = 2 the lines' two halves are fitted
+// on two threads. Only a scan line's
 // interior breakpoints are anchors: its ends lie on the other two borders, whose vertices are
 // exactly their own fits.
 void add_lines(const HeightGrid& grid,
                double eps,
                int cap,
+               bool greedy,
                const std::vector<std::pair<bool, int>>& lines,
                int threads,
                std::vector<GridPoint>& pts) {
     const auto fit = [&](std::size_t from, std::size_t to, std::vector<GridPoint>& out) {
         for (std::size_t i = from; i < to; ++i) {
             const auto [column, at] = lines[i];
-            const auto cuts = column ? column_breakpoints(grid, eps, at, cap)
-                                     : row_breakpoints(grid, eps, at, cap);
+            const auto cuts = column ? column_breakpoints(grid, eps, at, cap, greedy)
+                                     : row_breakpoints(grid, eps, at, cap, greedy);
             for (std::size_t k = 1; k + 1 < cuts.size(); ++k) {
                 out.push_back(column ? GridPoint{at, cuts[k]} : GridPoint{cuts[k], at});
             }
@@ -244,8 +300,8 @@ void add_lines(const HeightGrid& grid,
 } // namespace
 
 std::vector<GridPoint>
-anchor_points(const HeightGrid& grid, double eps, int max_step, int line_step, int threads) {
-    TB_ASSERT(max_step >= 0 && line_step >= 0);
+anchor_points(const HeightGrid& grid, double eps, int max_step, bool greedy_lines, int threads) {
+    TB_ASSERT(max_step >= 0);
     const int w = grid.width;
     const int h = grid.height;
     std::vector<GridPoint> pts;
@@ -265,9 +321,6 @@ anchor_points(const HeightGrid& grid, double eps, int max_step, int line_step, i
     for (int y : right) {
         pts.push_back({w - 1, y});
     }
-    // The interior lines' cap: the tighter of max_step and line_step (0 = none).
-    const int line_cap =
-        line_step == 0 ? max_step : (max_step == 0 ? line_step : std::min(max_step, line_step));
     // The paper's scan lines: vertical ones through the breakpoints of the horizontal border
     // with fewer of them (top on ties), horizontal ones through those of the vertical border
     // with fewer (left on ties).
@@ -280,7 +333,7 @@ anchor_points(const HeightGrid& grid, double eps, int max_step, int line_step, i
     for (std::size_t i = 1; i + 1 < rows.size(); ++i) {
         lines.push_back({false, rows[i]});
     }
-    add_lines(grid, eps, line_cap, lines, threads, pts);
+    add_lines(grid, eps, max_step, greedy_lines, lines, threads, pts);
     // The scan lines through the other two borders' breakpoints too, when the anchors stay
     // few (see kAnchorBudget). Judged by a forecast (each new line has as many interior
     // breakpoints as the two borders parallel to it have on average), so no line is fitted to
@@ -310,9 +363,13 @@ anchor_points(const HeightGrid& grid, double eps, int max_step, int line_step, i
                 lines.push_back({false, all_rows[i]});
             }
         }
-        add_lines(grid, eps, line_cap, lines, threads, pts);
+        add_lines(grid, eps, max_step, greedy_lines, lines, threads, pts);
     }
-    std::sort(pts.begin(), pts.end(), raster_less);
+    // Raster order: by y * w + x, below 2^40.
+    radix_sort(pts, [w](GridPoint p) {
+        return static_cast<std::uint64_t>(p.y) * static_cast<std::uint64_t>(w) +
+               static_cast<std::uint64_t>(p.x);
+    });
     pts.erase(std::unique(pts.begin(), pts.end()), pts.end());
     return pts;
 }

@@ -26,6 +26,18 @@ std::vector<int> fit_breakpoints(std::span<const float> z,
                                  double eps,
                                  int max_step = 0);
 
+// A cheap chain for the interior scan lines of Effort::Fast: from each breakpoint the longest
+// segment (at most max_step samples when max_step >= 1) whose slope lies in the eps tunnel of
+// every valid sample between, judged in doubles by cross-multiplication (no division). O(n):
+// each sample is visited by at most two segments' searches. Not the fewest breakpoints, and the
+// tunnel is not the exact edge test (a sample may miss eps in the last bit): the anchors it gives
+// only seed the split agent, which scans every triangle exactly. First 0, last n - 1,
+// increasing; a pure function of (z, valid, eps, max_step).
+std::vector<int> greedy_breakpoints(std::span<const float> z,
+                                    std::span<const std::uint8_t> valid,
+                                    double eps,
+                                    int max_step = 0);
+
 // True when the segment from sample i to sample j (i < j) keeps every valid sample in between
 // within eps (the exact test the fit is verified with).
 bool segment_fits(
@@ -39,13 +51,16 @@ struct HeightGrid;
 // through those of the vertical border with fewer breakpoints. Beyond the paper, when a
 // forecast from the borders puts the anchors within 1% of the samples (coarse eps), the scan
 // lines through the other two borders' breakpoints as well. Sorted in raster order, unique, always
-// containing the four corners; a pure function of (grid, eps, max_step, line_step). max_step as in
-// fit_breakpoints, for every fit. line_step >= 1 caps the interior scan lines' segments further
-// (the borders' fits never see it): each such fit then costs O(samples * line_step) instead of
-// O(samples * reach), where a coarse eps lets a segment reach far; 0 = no further cap.
-// threads = 2 fits the scan lines in two halves on two threads (the same anchors).
-std::vector<GridPoint> anchor_points(
-    const HeightGrid& grid, double eps, int max_step = 0, int line_step = 0, int threads = 1);
+// containing the four corners; a pure function of (grid, eps, max_step, greedy_lines). max_step
+// as in fit_breakpoints, for every fit. With greedy_lines the interior scan lines take
+// greedy_breakpoints' chains, O(samples) each, instead of the optimal fits, O(samples * reach)
+// (the borders' fits are the optimal ones either way). threads = 2 fits the scan lines in two
+// halves on two threads (the same anchors).
+std::vector<GridPoint> anchor_points(const HeightGrid& grid,
+                                     double eps,
+                                     int max_step = 0,
+                                     bool greedy_lines = false,
+                                     int threads = 1);
 
 // The breakpoints of one border: side 0 = top row (y = 0), 1 = bottom row, 2 = left column
 // (x = 0), 3 = right column; positions along the border.

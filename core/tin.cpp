@@ -5,6 +5,7 @@
 
 #include "core/error.hpp"
 #include "core/predicates.hpp"
+#include "core/radix_sort.hpp"
 
 namespace tb::core {
 
@@ -241,7 +242,7 @@ void Tin::compact(const std::function<void(Index, Index)>& swap_also) {
             keys.push_back({z_order_key(points[v]), v});
         }
     }
-    std::sort(keys.begin(), keys.end());
+    radix_sort(keys, [](const std::pair<std::uint64_t, Index>& k) { return k.first; });
     // New vertex numbers: the live ones in that order, then the removed ones (dropped below).
     LargeVector<Index> vmap(points.size(), kNone);
     for (Index i = 0; i < keys.size(); ++i) {

@@ -28,30 +28,29 @@ struct Plan {
     // over hmm's triangles at coarse eps); each later pass finds fewer removable vertices.
     int merge_rounds;
     MergeLimits merge;
-    // anchor_points' line_step: the interior scan lines' longest segment (0 = no cap).
-    int line_step;
+    // anchor_points' greedy_lines: the interior scan lines' greedy chains, O(samples) each.
+    bool greedy_lines = false;
 };
 
 Plan plan_for(Effort effort) {
     switch (effort) {
     case Effort::Fast:
-        // Interior scan lines of segments of at most 32 samples: at coarse eps their fits cost
-        // O(samples * 32) instead of O(samples * reach) (reach 64 on fuji-513 eps 50), and the
-        // few extra anchors they leave are what the merge pass removes first. Then one pass over
-        // the vertices of degree <= 5 with one dynamic program each: it removes most of what a
-        // full pass removes at a fraction of its cost, and takes every bench case under hmm's
-        // triangles.
-        return {1, MergeLimits{.max_hole = 5, .max_attempts = 1}, 32};
+        // The interior scan lines' greedy chains (the optimal fits cost O(samples * reach): a
+        // fifth of the instructions at fuji-513 eps 50; the greedy start even ends with fewer
+        // triangles, bench/README.md 2026-12-05). One pass over the vertices of degree <= 5
+        // with one dynamic program each: it removes most of what a full pass removes at a
+        // fraction of its cost, and takes every bench case under hmm's triangles.
+        return {1, MergeLimits{.max_hole = 5, .max_attempts = 1}, true};
     case Effort::Balanced:
         // One merge pass over the vertices of degree <= 8. The knee of the curve: in
         // instructions per triangle removed (fuji-513 eps 6), degree 6 after Fast's pass costs
         // 15 k, degrees 7-8 41 k, the larger holes of the same pass 137 k and Best's later passes
         // 107 k. 3-11 % more triangles than Best for 15-20 % fewer instructions.
-        return {1, MergeLimits{.max_hole = 8, .max_attempts = 6}, 0};
+        return {1, MergeLimits{.max_hole = 8, .max_attempts = 6}};
     case Effort::Best:
         break;
     }
-    return {4, MergeLimits{}, 0};
+    return {4, MergeLimits{}};
 }
 
 using Clock = std::chrono::steady_clock;
@@ -164,7 +163,7 @@ Mesh triangulate(const HeightGrid& grid,
     const int threads = big ? options.threads : 1;
     plan.merge.threads = threads;
     const std::vector<GridPoint> anchors =
-        anchor_points(grid, eps, max_step, plan.line_step, threads);
+        anchor_points(grid, eps, max_step, plan.greedy_lines, threads);
     mark(&TriangulatePhases::anchors_ms);
     // With room for the split agent's vertices (Refiner::kGrowth), which compact() keeps.
     Tin start = delaunay_rectangle(

@@ -14,8 +14,8 @@ namespace tb::core {
 //             most 4; holes of up to 24 vertices).
 //   Balanced: one merge pass over the vertices of degree <= 8: 3-11 % more triangles than
 //             Best for 15-20 % less work on the bench cases.
-//   Fast:     the split agent from cheaper anchors, then one merge pass over the vertices of
-//             degree <= 5 only, one dynamic program each.
+//   Fast:     the interior scan lines' greedy chains as anchors (O(samples) each), then one
+//             merge pass over the vertices of degree <= 5 only, one dynamic program each.
 // The measured curve (triangles against time, against hmm and delatin) is in bench/README.md,
 // "Effort levels".
 enum class Effort { Fast, Balanced, Best };

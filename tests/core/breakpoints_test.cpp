@@ -123,6 +123,59 @@ TEST_CASE("the 1-D fit has the optimal count on hand-made cases") {
             .size() == 2);
 }
 
+TEST_CASE("the greedy chain stays in the eps tunnel with no fewer breakpoints than the optimum "
+          "(seeds 1-300)") {
+    for (std::uint64_t seed = 1; seed <= 300; ++seed) {
+        terrain::Lcg r(seed);
+        const int n = 2 + static_cast<int>(r.next() * 40);
+        std::vector<float> z;
+        std::vector<std::uint8_t> valid;
+        const bool masked = seed % 3 == 0;
+        for (int k = 0; k < n; ++k) {
+            z.push_back(terrain::quantize(r.next() * 10.0 + (seed % 2 ? k * 1.7 : 0.0)));
+            if (masked) {
+                valid.push_back(r.next() < 0.7 ? 1 : 0);
+            }
+        }
+        // Non-dyadic eps keeps samples off the tunnel wall, where the greedy chain's
+        // cross-multiplied test and the exact one may differ in the last bit.
+        const double eps = 0.3 + 3.1 * r.next();
+        const int max_step = seed % 4 == 0 ? 3 : 0;
+        const auto chain = tb::core::greedy_breakpoints(z, valid, eps, max_step);
+        INFO("seed=", seed, " n=", n, " eps=", eps, " max_step=", max_step);
+        REQUIRE(chain.front() == 0);
+        REQUIRE(chain.back() == n - 1);
+        for (std::size_t s = 1; s < chain.size(); ++s) {
+            CHECK(chain[s - 1] < chain[s]);
+            CHECK((max_step == 0 || chain[s] - chain[s - 1] <= max_step));
+            CHECK(brute::fits(z, valid, eps, chain[s - 1], chain[s]));
+        }
+        CHECK(chain.size() >= tb::core::fit_breakpoints(z, valid, eps, max_step).size());
+    }
+}
+
+TEST_CASE("the greedy chain takes the longest hop from each breakpoint on hand-made cases") {
+    using V = std::vector<float>;
+    const std::vector<std::uint8_t> all;
+    CHECK(tb::core::greedy_breakpoints(V{0, 1, 2, 3, 4, 5}, all, 0.1) == std::vector<int>{0, 5});
+    CHECK(tb::core::greedy_breakpoints(V{0, 1, 2, 3, 2, 1, 0}, all, 0.1) ==
+          std::vector<int>{0, 3, 6});
+    CHECK(tb::core::greedy_breakpoints(V{5, -5}, all, 1.0) == std::vector<int>{0, 1});
+    CHECK(tb::core::greedy_breakpoints(V{0, 0, 90, 0, 0},
+                                       std::vector<std::uint8_t>{1, 1, 0, 1, 1},
+                                       0.5) == std::vector<int>{0, 4});
+    // With max_step 2 a straight line still needs a breakpoint every 2 samples.
+    CHECK(tb::core::greedy_breakpoints(V{0, 1, 2, 3, 4, 5}, all, 0.1, 2) ==
+          std::vector<int>{0, 2, 4, 5});
+    // Where the farthest first hop is not optimal: never fewer than the optimum.
+    const V z{0, 0, 0, 0, 3, 6, 3, 0, 0, 0};
+    for (double eps : {0.4, 0.9, 1.3, 2.2}) {
+        INFO("eps=", eps);
+        CHECK(tb::core::greedy_breakpoints(z, all, eps).size() >=
+              tb::core::fit_breakpoints(z, all, eps).size());
+    }
+}
+
 TEST_CASE("a fit where the farthest first hop is not optimal still finds the optimum") {
     // Greedy longest reach from 0 lands on a sample from which the rest needs more hops; the
     // shortest-hop search is exact. Checked against brute force on the spot.
@@ -197,19 +250,25 @@ std::vector<tb::core::GridPoint> paper_anchors(const tb::core::HeightGrid& g, do
     const auto top = border_breakpoints(g, eps, 0), bottom = border_breakpoints(g, eps, 1);
     const auto left = border_breakpoints(g, eps, 2), right = border_breakpoints(g, eps, 3);
     std::vector<tb::core::GridPoint> pts;
-    for (int x : top) pts.push_back({x, 0});
-    for (int x : bottom) pts.push_back({x, g.height - 1});
-    for (int y : left) pts.push_back({0, y});
-    for (int y : right) pts.push_back({g.width - 1, y});
+    for (int x : top)
+        pts.push_back({x, 0});
+    for (int x : bottom)
+        pts.push_back({x, g.height - 1});
+    for (int y : left)
+        pts.push_back({0, y});
+    for (int y : right)
+        pts.push_back({g.width - 1, y});
     const auto& cols = bottom.size() < top.size() ? bottom : top;
     for (std::size_t i = 1; i + 1 < cols.size(); ++i) {
         const auto ys = tb::core::fit_breakpoints(column_of(g, cols[i]), all, eps);
-        for (std::size_t k = 1; k + 1 < ys.size(); ++k) pts.push_back({cols[i], ys[k]});
+        for (std::size_t k = 1; k + 1 < ys.size(); ++k)
+            pts.push_back({cols[i], ys[k]});
     }
     const auto& rows = right.size() < left.size() ? right : left;
     for (std::size_t i = 1; i + 1 < rows.size(); ++i) {
         const auto xs = tb::core::fit_breakpoints(row_of(g, rows[i]), all, eps);
-        for (std::size_t k = 1; k + 1 < xs.size(); ++k) pts.push_back({xs[k], rows[i]});
+        for (std::size_t k = 1; k + 1 < xs.size(); ++k)
+            pts.push_back({xs[k], rows[i]});
     }
     std::sort(pts.begin(), pts.end(), raster_before);
     pts.erase(std::unique(pts.begin(), pts.end()), pts.end());

@@ -332,7 +332,8 @@ TEST_CASE("a grid of 2^18 samples splits its work in two: the same mesh on 1 or 
             CHECK(tb::core::max_error(two, g, 2) == tb::core::max_error(two, g, 1));
         }
     }
-    CHECK(tb::core::anchor_points(g, 2.0, 0, 0, 2) == tb::core::anchor_points(g, 2.0, 0, 0, 1));
+    CHECK(tb::core::anchor_points(g, 2.0, 0, true, 2) ==
+          tb::core::anchor_points(g, 2.0, 0, true, 1));
     TriangulateOptions bad{.eps = 2.0};
     for (int threads : {0, 3, -1}) {
         bad.threads = threads;
