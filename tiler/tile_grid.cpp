@@ -77,8 +77,8 @@ bool is_valid(Scheme scheme, const TileId& id) {
            id.y < tiles_down(scheme, id.z);
 }
 
-// Whether a range's tiles all lie in the scheme (an empty range does).
-bool in_scheme(Scheme scheme, const TileRange& r) {
+// Whether a range's tiles all lie in the scheme (an empty range does). Used by assertions only.
+[[maybe_unused]] bool in_scheme(Scheme scheme, const TileRange& r) {
     return r.empty() ||
            (is_valid(scheme, {r.z, r.x0, r.y0}) && is_valid(scheme, {r.z, r.x1, r.y1}));
 }

@@ -125,7 +125,8 @@ TEST_CASE("soak: 30 s of mixed requests while the source is replaced every few s
     std::string seen;
     long total = 0;
     for (const auto& [status, n] : statuses) {
-        seen += " " + std::to_string(status) + ":" + std::to_string(n);
+        seen += ' ';
+        seen += std::to_string(status) + ":" + std::to_string(n);
         total += n;
     }
     MESSAGE("statuses" << seen << "; RSS first/middle/last " << rss.front() << " / "

@@ -260,7 +260,10 @@ std::string metadata_json(const ArchiveContent& c, const Header& h) {
            ",\"encoding\":" + json_string(c.encoding) + ",\"documents\":{";
     bool first = true;
     for (const auto& [name, bytes] : c.documents) {
-        out += (first ? "" : ",") + json_string(name) + ":" + json_string(bytes);
+        if (!first) {
+            out += ',';
+        }
+        out += json_string(name) + ":" + json_string(bytes);
         first = false;
     }
     return out + "}}}";
