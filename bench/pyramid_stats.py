@@ -61,9 +61,9 @@ def errors(layer_dir):
             t = tiles.pop()
             uri = t.get("content", {}).get("uri")
             if uri and uri.endswith(".json"):
-                stack.append(os.path.join(base, uri))
+                stack.append(os.path.normpath(os.path.join(base, uri)))
             elif uri:
-                z = int(os.path.join(base, uri).split("/")[0])
+                z = int(os.path.normpath(os.path.join(base, uri)).split("/")[0])
                 out.setdefault(z, []).append(t["geometricError"])
             tiles.extend(t.get("children", []))
     return out
