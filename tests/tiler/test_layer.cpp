@@ -373,6 +373,32 @@ TEST_CASE("a max_zoom below the native zoom scales the default eps to that zoom'
     CHECK(glb.size() > 1000);
 }
 
+TEST_CASE("the default finest eps is never below an integer DEM's height step") {
+    // 0.0001 degree pixels (about 8 m at 46 N): resolution / 45 is about 0.18 m, below the 1 m
+    // an Int16 DEM in metres can tell apart, so its default is that step; at a scale of 0.1 m
+    // the step is 0.1 m and resolution / 45 rules again, as it does for Float32 heights.
+    ScratchDir dir;
+    const auto finest_eps = [&](const std::string& name, GDALDataType type, double scale) {
+        Fixture f;
+        f.width = 200, f.height = 200;
+        f.type = type;
+        f.scale = scale;
+        f.epsg = 4326;
+        f.geotransform = std::array<double, 6>{8.0, 0.0001, 0, 46.02, 0, -0.0001};
+        for (int k = 0; k < f.width * f.height; ++k) {
+            f.values.push_back(std::round(300 + 40 * std::sin(k % 200 * 0.05) + k / 200 * 0.2));
+        }
+        const auto layer = open_layer({tb_test::write_fixture(dir.file(name), f)});
+        return layer->eps_for_zoom(layer->max_zoom());
+    };
+    const double float_eps = finest_eps("float.tif", GDT_Float32, 1.0);
+    CHECK(float_eps > 0.1);
+    CHECK(float_eps < 0.5);
+    CHECK(finest_eps("int16.tif", GDT_Int16, 1.0) == 1.0);
+    CHECK(finest_eps("uint16.tif", GDT_UInt16, 1.0) == 1.0);
+    CHECK(finest_eps("decimetres.tif", GDT_Int16, 0.1) == doctest::Approx(float_eps));
+}
+
 TEST_CASE("a DEM too large to read whole gets bounding volumes over the Earth's whole relief") {
     ScratchDir dir;
     // 64 x 64 samples of 100 m with one spike of 5000 m, over a degree square.

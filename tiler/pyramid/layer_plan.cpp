@@ -25,6 +25,17 @@ namespace {
 // far below CesiumJS's level geometric error (77067 m / 2^z, about 75 m at SRTM3's z = 10).
 constexpr double kResolutionPerEps = 45.0;
 
+// The step between two heights an integer DEM can store, metres (its scale), or 0 for floating
+// point data. The default eps is never below it: stored heights are rounded to it, so a mesh held
+// closer than one step follows the rounding's staircase, a contour line at every step, instead
+// of the terrain. On a 6 m Int16 DEM (N48W125 resampled 4x, resolution / 45 = 0.14 m) the median
+// 3D Tiles tile of the finest zoom had 16.4k triangles at 0.14 m and 3.2k at 1 m.
+double height_step(const DemInfo& info) {
+    const std::string& t = info.data_type;
+    const bool integer = t.find("Int") != std::string::npos || t == "Byte";
+    return integer ? std::abs(info.scale) : 0.0;
+}
+
 // CesiumJS's geometric error of a geodetic terrain level at zoom 0, metres: the equator's
 // length / 4 over a 65-sample tile, two tiles across (getLevelMaximumGeometricError).
 constexpr double kCesiumLevelError = 6378137.0 * 2 * 3.14159265358979323846 * 0.25 / (65 * 2);
@@ -63,9 +74,11 @@ LayerPlan::LayerPlan(const LayerOptions& options, const DemSource& source)
     // source's pixels when max_zoom is set below the native zoom.
     const double pixels =
         std::max(1.0, source_.pixels_per_sample(options_.scheme, max_zoom_, options_.tile_size));
-    finest_eps_ = options_.finest_eps
-                      ? *options_.finest_eps
-                      : std::max(kMinEps, info.resolution_m * pixels / kResolutionPerEps);
+    finest_eps_ =
+        options_.finest_eps
+            ? *options_.finest_eps
+            : std::max(
+                  {kMinEps, info.resolution_m * pixels / kResolutionPerEps, height_step(info)});
     compute_height_range();
 }
 
