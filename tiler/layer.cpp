@@ -373,14 +373,16 @@ public:
             return t;
         }
         // Every valid source pixel under the tile, as the drawn tile must hold it.
-        for (const SourcePixel& p : source_->pixels_in(t.raster.bounds)) {
+        // Reserved whole: pages a sparse window never fills are never touched, and the list does
+        // not pass through the copies that growing it would make.
+        t.source_pixels.reserve(source_->window_pixels(t.raster.bounds));
+        const bool egm96 = plan_.datum() == VerticalDatum::Egm96;
+        source_->pixels_in(t.raster.bounds, [&](const SourcePixel& p) {
             CheckPoint c;
             lonlat_to_grid(t.raster, {p.lon, p.lat}, c.column, c.row);
-            c.height =
-                p.height +
-                (plan_.datum() == VerticalDatum::Egm96 ? egm96_undulation(p.lon, p.lat) : 0.0);
+            c.height = p.height + (egm96 ? egm96_undulation(p.lon, p.lat) : 0.0);
             t.source_pixels.push_back(c);
-        }
+        });
         return t;
     }
 

@@ -345,13 +345,16 @@ points_error(const TileMesh& mesh, const GridVertices& g, const std::vector<Chec
         i = std::clamp(static_cast<int>(std::floor(c - c0)), 0, cells_x - 1);
         j = std::clamp(static_cast<int>(std::floor(r - r0)), 0, cells_y - 1);
     };
+    // The points in cell order (a counting sort): 4 bytes a point beside the points themselves,
+    // which at coarse zooms are millions of source pixels.
     std::vector<std::uint32_t> start(static_cast<std::size_t>(cells_x) * cells_y + 1, 0);
-    std::vector<int> cell(points.size());
-    for (std::size_t k = 0; k < points.size(); ++k) {
+    const auto cell_index = [&](const CheckPoint& p) {
         int i = 0, j = 0;
-        cell_of(points[k].column, points[k].row, i, j);
-        cell[k] = j * cells_x + i;
-        ++start[static_cast<std::size_t>(cell[k]) + 1];
+        cell_of(p.column, p.row, i, j);
+        return static_cast<std::size_t>(j) * cells_x + i;
+    };
+    for (const CheckPoint& p : points) {
+        ++start[cell_index(p) + 1];
     }
     for (std::size_t k = 1; k < start.size(); ++k) {
         start[k] += start[k - 1];
@@ -360,11 +363,13 @@ points_error(const TileMesh& mesh, const GridVertices& g, const std::vector<Chec
     {
         std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
         for (std::size_t k = 0; k < points.size(); ++k) {
-            order[fill[static_cast<std::size_t>(cell[k])]++] = static_cast<std::uint32_t>(k);
+            order[fill[cell_index(points[k])]++] = static_cast<std::uint32_t>(k);
         }
     }
+    // The largest error over every (triangle, point it holds) pair is the largest over points of
+    // their worst holding triangle; a point no triangle holds is outside.
     constexpr double kEdge = -1e-9;
-    std::vector<double> error(points.size(), -1);
+    std::vector<bool> held(points.size(), false);
     for (std::size_t t = 0; t < mesh.triangle_count(); ++t) {
         const auto [a, b, c, det] = snapped_triangle(mesh, g, t);
         if (det == 0) {
@@ -386,18 +391,13 @@ points_error(const TileMesh& mesh, const GridVertices& g, const std::vector<Chec
                         continue;
                     }
                     const double e = std::abs(la * a[2] + lb * b[2] + lc * c[2] - p.height);
-                    error[order[o]] = std::max(error[order[o]], e);
+                    report.points_error = std::max(report.points_error, e);
+                    held[order[o]] = true;
                 }
             }
         }
     }
-    for (double e : error) {
-        if (e < 0) {
-            ++report.points_outside;
-        } else {
-            report.points_error = std::max(report.points_error, e);
-        }
-    }
+    report.points_outside = static_cast<std::size_t>(std::count(held.begin(), held.end(), false));
     return report;
 }
 

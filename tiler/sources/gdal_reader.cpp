@@ -175,9 +175,24 @@ public:
     read_pixels(std::int64_t column0, std::int64_t row0, int width, int height) const override;
     bool
     window_empty(std::int64_t column0, std::int64_t row0, int width, int height) const override;
-    std::vector<SourcePixel> pixels_in(const LonLatBox& box) const override;
+    void pixels_in(const LonLatBox& box, const PixelVisitor& visit) const override;
+    std::size_t window_pixels(const LonLatBox& box) const override {
+        const std::optional<Window> w = window_of(box);
+        return w ? static_cast<std::size_t>(w->width) * static_cast<std::size_t>(w->height) : 0;
+    }
 
 private:
+    // A window of source pixels: columns [column0, column0 + width), rows likewise.
+    struct Window {
+        std::int64_t column0 = 0, row0 = 0;
+        int width = 0, height = 0;
+    };
+    // The source pixels whose centres may lie in `box` (its outline densified, with a margin);
+    // nullopt when none. Throws InputError above kMaxPixelsPerTile.
+    std::optional<Window> window_of(const LonLatBox& box) const;
+    // Source CRS coordinates to WGS84 lon/lat in place; `good` flags the points that transformed.
+    void to_lonlat(std::vector<double>& x, std::vector<double>& y, std::vector<int>& good) const;
+
     struct Overview {
         int index = 0, width = 0, height = 0;
     };
@@ -570,8 +585,7 @@ bool GdalDemSource::window_empty(std::int64_t column0,
     return status == GDAL_DATA_COVERAGE_STATUS_EMPTY;
 }
 
-std::vector<SourcePixel> GdalDemSource::pixels_in(const LonLatBox& box) const {
-    TB_ASSERT(georeferenced_);
+std::optional<GdalDemSource::Window> GdalDemSource::window_of(const LonLatBox& box) const {
     Lease h = acquire();
     // The window: the box outline, densified, in source pixel coordinates.
     constexpr int kSteps = 32;
@@ -598,9 +612,8 @@ std::vector<SourcePixel> GdalDemSource::pixels_in(const LonLatBox& box) const {
         u_lo = std::min(u_lo, u), u_hi = std::max(u_hi, u);
         v_lo = std::min(v_lo, v), v_hi = std::max(v_hi, v);
     }
-    std::vector<SourcePixel> out;
     if (!(u_lo <= u_hi && v_lo <= v_hi)) {
-        return out;
+        return std::nullopt;
     }
     // A margin of a few pixels covers the curvature of the box's edges between the probes.
     const std::int64_t c0 = std::max<std::int64_t>(0, std::int64_t(std::floor(u_lo)) - 4);
@@ -608,7 +621,7 @@ std::vector<SourcePixel> GdalDemSource::pixels_in(const LonLatBox& box) const {
     const std::int64_t c1 = std::min<std::int64_t>(info_.width, std::int64_t(std::ceil(u_hi)) + 4);
     const std::int64_t r1 = std::min<std::int64_t>(info_.height, std::int64_t(std::ceil(v_hi)) + 4);
     if (c0 >= c1 || r0 >= r1) {
-        return out;
+        return std::nullopt;
     }
     const double count = static_cast<double>(c1 - c0) * static_cast<double>(r1 - r0);
     if (count > kMaxPixelsPerTile) {
@@ -617,10 +630,56 @@ std::vector<SourcePixel> GdalDemSource::pixels_in(const LonLatBox& box) const {
                          std::to_string(std::llround(kMaxPixelsPerTile)) +
                          " one tile may read; use a finer min zoom");
     }
-    const int ww = static_cast<int>(c1 - c0), wh = static_cast<int>(r1 - r0);
-    h.reset(); // read_pixels borrows a handle of its own
-    const std::vector<double> heights = read_pixels(c0, r0, ww, wh);
-    h = acquire();
+    return Window{c0, r0, static_cast<int>(c1 - c0), static_cast<int>(r1 - r0)};
+}
+
+void GdalDemSource::pixels_in(const LonLatBox& box, const PixelVisitor& visit) const {
+    TB_ASSERT(georeferenced_);
+    const std::optional<Window> w = window_of(box);
+    if (!w) {
+        return;
+    }
+    // Strips of about 64k pixels: the memory a tile's check needs is its own list of pixels,
+    // not several full-window copies of them.
+    const int strip = std::max(1, 65536 / w->width);
+    std::vector<double> px, py, hs;
+    std::vector<int> good;
+    for (int j0 = 0; j0 < w->height; j0 += strip) {
+        const int rows = std::min(strip, w->height - j0);
+        const std::vector<double> heights = read_pixels(w->column0, w->row0 + j0, w->width, rows);
+        px.clear(), py.clear(), hs.clear();
+        const auto& g = info_.geotransform;
+        for (int j = 0; j < rows; ++j) {
+            for (int i = 0; i < w->width; ++i) {
+                const double value = heights[static_cast<std::size_t>(j) * w->width + i];
+                if (std::isnan(value)) {
+                    continue;
+                }
+                const double u = static_cast<double>(w->column0 + i) + 0.5;
+                const double v = static_cast<double>(w->row0 + j0 + j) + 0.5;
+                px.push_back(g[0] + u * g[1] + v * g[2]);
+                py.push_back(g[3] + u * g[4] + v * g[5]);
+                hs.push_back(value);
+            }
+        }
+        if (px.empty()) {
+            continue;
+        }
+        good.assign(px.size(), 1);
+        to_lonlat(px, py, good);
+        for (std::size_t k = 0; k < px.size(); ++k) {
+            if (good[k] && px[k] >= box.west && px[k] <= box.east && py[k] >= box.south &&
+                py[k] <= box.north) {
+                visit({px[k], py[k], hs[k]});
+            }
+        }
+    }
+}
+
+void GdalDemSource::to_lonlat(std::vector<double>& x,
+                              std::vector<double>& y,
+                              std::vector<int>& good) const {
+    Lease h = acquire();
     if (!h->to_lonlat) {
         OGRSpatialReference wgs84 = scheme_srs(Scheme::Geodetic);
         h->to_lonlat.reset(OGRCreateCoordinateTransformation(&srs_, &wgs84));
@@ -629,34 +688,7 @@ std::vector<SourcePixel> GdalDemSource::pixels_in(const LonLatBox& box) const {
                              gdal_message() + ")");
         }
     }
-    const auto& g = info_.geotransform;
-    std::vector<double> px, py;
-    std::vector<double> hs;
-    for (int j = 0; j < wh; ++j) {
-        for (int i = 0; i < ww; ++i) {
-            const double value = heights[static_cast<std::size_t>(j) * ww + i];
-            if (std::isnan(value)) {
-                continue;
-            }
-            const double u = static_cast<double>(c0 + i) + 0.5;
-            const double v = static_cast<double>(r0 + j) + 0.5;
-            px.push_back(g[0] + u * g[1] + v * g[2]);
-            py.push_back(g[3] + u * g[4] + v * g[5]);
-            hs.push_back(value);
-        }
-    }
-    std::vector<int> good(px.size(), 1);
-    if (!px.empty()) {
-        h->to_lonlat->Transform(
-            static_cast<int>(px.size()), px.data(), py.data(), nullptr, good.data());
-    }
-    for (std::size_t k = 0; k < px.size(); ++k) {
-        if (good[k] && px[k] >= box.west && px[k] <= box.east && py[k] >= box.south &&
-            py[k] <= box.north) {
-            out.push_back({px[k], py[k], hs[k]});
-        }
-    }
-    return out;
+    h->to_lonlat->Transform(static_cast<int>(x.size()), x.data(), y.data(), nullptr, good.data());
 }
 
 core::HeightGrid GdalDemSource::read_all() const {

@@ -6,6 +6,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -215,10 +216,15 @@ public:
     virtual bool
     window_empty(std::int64_t column0, std::int64_t row0, int width, int height) const = 0;
 
-    // Every valid full-resolution pixel whose centre lies in `box` (closed), its centre
-    // transformed to WGS84 lon/lat. Throws InputError when the window it needs exceeds
-    // kMaxPixelsPerTile. Requires georeferenced(). Thread-safe.
-    virtual std::vector<SourcePixel> pixels_in(const LonLatBox& box) const = 0;
+    // Calls `visit` with every valid full-resolution pixel whose centre lies in `box` (closed),
+    // its centre transformed to WGS84 lon/lat, row by row; the source holds only a strip of rows
+    // at a time. Throws InputError when the window it needs exceeds kMaxPixelsPerTile. Requires
+    // georeferenced(). Thread-safe.
+    using PixelVisitor = std::function<void(const SourcePixel&)>;
+    virtual void pixels_in(const LonLatBox& box, const PixelVisitor& visit) const = 0;
+    // At most how many pixels pixels_in(box) visits: the size of the window it reads. Throws
+    // as pixels_in does.
+    virtual std::size_t window_pixels(const LonLatBox& box) const = 0;
 
     // The whole band 1 at full resolution, row 0 = first raster row, nodata marked invalid and
     // filled (fill_voids, margin 0). Needs no georeferencing. Throws InputError when every
