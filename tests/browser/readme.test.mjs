@@ -390,20 +390,17 @@ function TerrainLayer(props) { const layer = new deck.TerrainLayer(props); tbLay
     packages: null, // the snippet's own imports
     importMap: true,
     body: '',
-    before: "import * as THREE from 'three';",
-    // A renderer, a camera looking down at the tileset once its root is in, and the update loop
-    // a TilesRenderer needs.
+    // The renderer, scene and camera the snippet hands its TilesRenderer; after it, the camera
+    // looks down at the tileset once its root is in, and the frame loop calls tiles.update().
+    before: `import * as THREE from 'three';
+const renderer = new THREE.WebGLRenderer();
+renderer.setSize(innerWidth, innerHeight);
+document.body.appendChild(renderer.domElement);
+const scene = new THREE.Scene();
+scene.add(new THREE.AmbientLight(0xffffff, 1));
+const camera = new THREE.PerspectiveCamera(60, innerWidth / innerHeight, 1, 1e8);`,
     after: `{
   if (typeof tiles === 'undefined') throw new Error('the snippet makes no const tiles');
-  const renderer = new THREE.WebGLRenderer();
-  renderer.setSize(innerWidth, innerHeight);
-  document.body.appendChild(renderer.domElement);
-  const scene = new THREE.Scene();
-  scene.add(new THREE.AmbientLight(0xffffff, 1));
-  const camera = new THREE.PerspectiveCamera(60, innerWidth / innerHeight, 1, 1e8);
-  scene.add(tiles.group);
-  tiles.setCamera(camera);
-  tiles.setResolutionFromRenderer(camera, renderer);
   let models = 0;
   let placed = false;
   tiles.addEventListener('load-model', () => { ++models; });
