@@ -62,6 +62,18 @@ std::string raw_tile(const std::string& path, int z, std::int64_t col, std::int6
     return out;
 }
 
+// Runs `sql` on the SQLite file at `path`, as another program would.
+void raw_exec(const std::string& path, const std::string& sql) {
+    sqlite3* db = nullptr;
+    REQUIRE(sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READWRITE, nullptr) == SQLITE_OK);
+    char* message = nullptr;
+    const int rc = sqlite3_exec(db, sql.c_str(), nullptr, nullptr, &message);
+    INFO(sql << ": " << (message ? message : ""));
+    sqlite3_free(message);
+    sqlite3_close(db);
+    REQUIRE(rc == SQLITE_OK);
+}
+
 // The pixels (all bands, band-interleaved) of `ds`'s window, as GDAL reads them.
 std::vector<unsigned char> pixels(GDALDatasetH ds, int x, int y, int w, int h, int bands) {
     std::vector<unsigned char> out(static_cast<std::size_t>(w) * h * bands);
@@ -122,6 +134,48 @@ TEST_CASE("an mbtiles store round-trips DEM tiles byte for byte in TMS rows, wit
     CHECK_FALSE(store->has_layer("hills"));
     CHECK_FALSE(store->get(dem_key(0, 0, 0)).has_value());
     CHECK(metadata_of(path).empty());
+}
+
+TEST_CASE("a damaged mbtiles or pmtiles-staging tile reads as missing, is made again, and "
+          "stops a pmtiles archive from being assembled") {
+    TempDir dir;
+    const std::string path = dir / "out.mbtiles";
+    {
+        auto store = TileStore::open(path);
+        store->put(dem_key(3, 5, 1), "good bytes");
+        store->put(dem_key(3, 5, 2), "other bytes");
+        store->finish();
+    }
+    // One bit of (3, 5, 1) flipped (TMS row 6), and a tile another program added (no checksum).
+    raw_exec(path,
+             "UPDATE tiles SET tile_data = CAST('good byteS' AS BLOB) WHERE zoom_level=3"
+             " AND tile_column=5 AND tile_row=6;"
+             "INSERT INTO tiles VALUES(4, 0, 15, CAST('theirs' AS BLOB));");
+    {
+        auto store = TileStore::open(path);
+        CHECK_FALSE(store->get(dem_key(3, 5, 1)).has_value());
+        CHECK_FALSE(store->contains(dem_key(3, 5, 1))); // so --resume makes it again
+        CHECK(store->get(dem_key(3, 5, 2)) == "other bytes");
+        CHECK(store->get(dem_key(4, 0, 0)) == "theirs");
+        store->put(dem_key(3, 5, 1), "good bytes");
+        CHECK(store->get(dem_key(3, 5, 1)) == "good bytes");
+    }
+    // The PMTiles store stages its tiles in such a file: a damaged staged tile is refused when
+    // the archive is assembled, naming it, instead of being published.
+    const std::string archive = dir / "out.pmtiles";
+    {
+        auto store = TileStore::open(archive);
+        store->put(dem_key(2, 1, 1), "staged bytes");
+    }
+    raw_exec(archive + ".staging", "UPDATE tiles SET tile_data = CAST('staged bytez' AS BLOB);");
+    auto store = TileStore::open(archive);
+    CHECK_FALSE(store->get(dem_key(2, 1, 1)).has_value());
+    try {
+        store->finish();
+        FAIL("a damaged staged tile was published");
+    } catch (const tb::IoError& e) {
+        CHECK(std::string(e.what()).find("tile 2/1/1 is damaged") != std::string::npos);
+    }
 }
 
 TEST_CASE("an mbtiles store refuses mesh formats, a second layer or encoding, and non-XYZ tiles") {

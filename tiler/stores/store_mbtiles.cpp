@@ -4,6 +4,7 @@
 #include "core/error.hpp"
 #include "tiler/json_number.hpp"
 #include "tiler/log.hpp"
+#include "tiler/stores/checksum.hpp"
 
 #include <algorithm>
 
@@ -21,16 +22,31 @@ std::string tile_text(const TileId& id) {
     return std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
 }
 
+// A tile row joined with its checksum: data, then crc (NULL for a tile another program wrote).
+constexpr const char* kTileWithCrc =
+    "SELECT t.zoom_level, t.tile_column, t.tile_row, t.tile_data, c.crc FROM tiles t"
+    " LEFT JOIN terrabound_tile_crc c ON c.zoom_level=t.zoom_level AND"
+    " c.tile_column=t.tile_column AND c.tile_row=t.tile_row";
+
+// Whether column 3's data of a kTileWithCrc row matches its checksum (column 4), or has none.
+bool intact(sqlite3_stmt* s, const std::string& data) {
+    return sqlite3_column_type(s, 4) == SQLITE_NULL ||
+           sqlite3_column_int64(s, 4) == store_checksum(data);
+}
+
 } // namespace
 
 MbtilesStore::MbtilesStore(std::string path, std::string shown_as, std::string kind)
     : shown_as_(shown_as.empty() ? path : std::move(shown_as)), kind_(std::move(kind)),
       db_(std::move(path), true) {
     create_tables();
-    get_ = db_.prepare(
-        "SELECT tile_data FROM tiles WHERE zoom_level=?1 AND tile_column=?2 AND tile_row=?3");
+    get_ = db_.prepare((std::string(kTileWithCrc) +
+                        " WHERE t.zoom_level=?1 AND t.tile_column=?2 AND t.tile_row=?3")
+                           .c_str());
     put_ = db_.prepare("INSERT OR REPLACE INTO tiles(zoom_level, tile_column, tile_row, tile_data)"
                        " VALUES(?1, ?2, ?3, ?4)");
+    put_crc_ = db_.prepare("INSERT OR REPLACE INTO terrabound_tile_crc(zoom_level, tile_column,"
+                           " tile_row, crc) VALUES(?1, ?2, ?3, ?4)");
     get_doc_ = db_.prepare("SELECT data FROM terrabound_documents WHERE layer=?1 AND name=?2");
     put_doc_ = db_.prepare(
         "INSERT OR REPLACE INTO terrabound_documents(layer, name, data) VALUES(?1, ?2, ?3)");
@@ -50,7 +66,11 @@ void MbtilesStore::create_tables() {
                      "CREATE UNIQUE INDEX IF NOT EXISTS tile_index ON tiles(zoom_level,"
                      " tile_column, tile_row);"
                      "CREATE TABLE IF NOT EXISTS terrabound_documents(layer TEXT NOT NULL,"
-                     " name TEXT NOT NULL, data BLOB NOT NULL, PRIMARY KEY(layer, name));",
+                     " name TEXT NOT NULL, data BLOB NOT NULL, PRIMARY KEY(layer, name));"
+                     "CREATE TABLE IF NOT EXISTS terrabound_tile_crc(zoom_level INTEGER NOT NULL,"
+                     " tile_column INTEGER NOT NULL, tile_row INTEGER NOT NULL,"
+                     " crc INTEGER NOT NULL, PRIMARY KEY(zoom_level, tile_column, tile_row))"
+                     " WITHOUT ROWID;",
                  "create the MBTiles tables");
     });
 }
@@ -141,7 +161,14 @@ std::optional<std::string> MbtilesStore::get(const TileKey& key) const {
     if (db_.step(get_.get(), "read a tile") != SQLITE_ROW) {
         return std::nullopt;
     }
-    return SqliteDb::column_bytes(get_.get(), 0);
+    std::string data = SqliteDb::column_bytes(get_.get(), 3);
+    if (!intact(get_.get(), data)) {
+        log::warn(shown_as_ + ": tile " + tile_text(key.id) + " is damaged (" +
+                  std::to_string(data.size()) +
+                  " bytes that do not match their checksum); not served, it is made again");
+        return std::nullopt;
+    }
+    return data;
 }
 
 void MbtilesStore::put_locked(const TileKey& key, std::string_view bytes) {
@@ -152,6 +179,12 @@ void MbtilesStore::put_locked(const TileKey& key, std::string_view bytes) {
     sqlite3_bind_int64(put_.get(), 3, rows_at(key.id.z) - 1 - key.id.y);
     SqliteDb::bind_blob(put_.get(), 4, bytes);
     db_.step(put_.get(), "write a tile");
+    SqliteReset reset_crc{put_crc_.get()};
+    sqlite3_bind_int(put_crc_.get(), 1, key.id.z);
+    sqlite3_bind_int64(put_crc_.get(), 2, key.id.x);
+    sqlite3_bind_int64(put_crc_.get(), 3, rows_at(key.id.z) - 1 - key.id.y);
+    sqlite3_bind_int64(put_crc_.get(), 4, store_checksum(bytes));
+    db_.step(put_crc_.get(), "write a tile's checksum");
 }
 
 void MbtilesStore::put(const TileKey& key, std::string_view bytes) {
@@ -234,7 +267,8 @@ void MbtilesStore::remove_layer(const std::string& layer) {
         return;
     }
     db_.transaction("remove a layer", [&] {
-        db_.exec("DELETE FROM tiles; DELETE FROM terrabound_documents; DELETE FROM metadata;",
+        db_.exec("DELETE FROM tiles; DELETE FROM terrabound_tile_crc;"
+                 " DELETE FROM terrabound_documents; DELETE FROM metadata;",
                  "remove a layer");
     });
     layer_.clear();
@@ -254,8 +288,8 @@ std::optional<Format> MbtilesStore::format() const {
 void MbtilesStore::for_each_tile(
     const std::function<void(const TileId&, const std::string&)>& fn) const {
     std::lock_guard lock(mutex_);
-    auto s = db_.prepare("SELECT zoom_level, tile_column, tile_row, tile_data FROM tiles"
-                         " ORDER BY zoom_level, tile_column, tile_row");
+    auto s = db_.prepare(
+        (std::string(kTileWithCrc) + " ORDER BY t.zoom_level, t.tile_column, t.tile_row").c_str());
     while (db_.step(s.get(), "read the tiles") == SQLITE_ROW) {
         const int z = sqlite3_column_int(s.get(), 0);
         if (z < 0 || z > kMaxZoom) {
@@ -263,7 +297,13 @@ void MbtilesStore::for_each_tile(
         }
         const TileId id{
             z, sqlite3_column_int64(s.get(), 1), rows_at(z) - 1 - sqlite3_column_int64(s.get(), 2)};
-        fn(id, SqliteDb::column_bytes(s.get(), 3));
+        const std::string data = SqliteDb::column_bytes(s.get(), 3);
+        if (!intact(s.get(), data)) {
+            throw IoError(shown_as_ + ": tile " + tile_text(id) +
+                          " is damaged (its bytes do not match their checksum); run the build "
+                          "again with --resume, which makes it again");
+        }
+        fn(id, data);
     }
 }
 

@@ -10,6 +10,10 @@
 //       for the XYZ tile (z, x, y) Terrabound's DEM tiles use;
 //   terrabound_documents(layer, name, data)     the build's documents (build-manifest.json and
 //       the like), which MBTiles has no place for; readers of MBTiles ignore the table.
+//   terrabound_tile_crc(zoom_level, tile_column, tile_row, crc)   the CRC-32 of each tile's data
+//       (tiler/stores/checksum.hpp): a tile that does not match it is damaged and reads as
+//       missing, with a warning (so it is made again, never served); a tile without one (another
+//       program wrote it) reads as it is.
 // The file's application_id is 0x4d504258 ("MPBX"), as the spec recommends. Every put is one
 // transaction (put_batch one for the batch), in WAL mode while open; finish() switches the file
 // back to a rollback journal so that it is one self-contained file to copy or publish.
@@ -57,7 +61,8 @@ public:
     // What it holds: the layer ("" while empty) and the DEM encoding (nullopt before a tile).
     std::string layer() const;
     std::optional<Format> format() const;
-    // Calls fn(XYZ id, bytes) for every tile, in (zoom, column, row) order.
+    // Calls fn(XYZ id, bytes) for every tile, in (zoom, column, row) order. Throws IoError at a
+    // damaged tile.
     void for_each_tile(const std::function<void(const TileId&, const std::string&)>& fn) const;
     // The held layer's documents: name -> bytes.
     std::map<std::string, std::string> documents() const;
@@ -75,7 +80,7 @@ private:
     mutable std::mutex mutex_;
     std::string layer_;
     std::optional<Format> format_;
-    SqliteStmt get_, put_, get_doc_, put_doc_, set_meta_;
+    SqliteStmt get_, put_, put_crc_, get_doc_, put_doc_, set_meta_;
 };
 
 } // namespace tb::tiler
