@@ -561,7 +561,7 @@ TileService::Impl::make(const TileRequest& r, const Job& job, std::exception_ptr
     const tiler::CancelFn cancelled = [&job] { return job.cancelled.load(); };
     try {
         auto made = make_blob(tiler::is_dem_format(r.format)
-                                  ? tiler::make_dem_tile(layer, r.tile, r.format)
+                                  ? tiler::make_dem_tile(layer, r.tile, r.format, cancelled)
                                   : layer.make_tile(r.tile, r.format, r.eps, cancelled));
         ++metrics.tiles_generated;
         return made;

@@ -130,9 +130,15 @@ TileRange dem_tiles_at(const Layer& layer, int z) {
     return tiles_covering(Scheme::Mercator, plan.bounds, z);
 }
 
-std::vector<double> dem_tile_heights(const Layer& layer, const ValidTile& tile) {
+std::vector<double>
+dem_tile_heights(const Layer& layer, const ValidTile& tile, const CancelFn& cancelled) {
     TB_ASSERT(tile.scheme() == Scheme::Mercator);
     const TileId& id = tile.id();
+    const auto checkpoint = [&](const char* before) {
+        if (cancelled && cancelled()) {
+            throw Cancelled("DEM tile " + tile_name(id) + " cancelled before " + before);
+        }
+    };
     const LayerOptions& o = layer.options();
     const DemTilePlan plan = dem_tile_plan(layer);
     if (!in_range(dem_tiles_at(layer, id.z), id)) {
@@ -150,6 +156,9 @@ std::vector<double> dem_tile_heights(const Layer& layer, const ValidTile& tile) 
     std::vector<double> heights(static_cast<std::size_t>(w) * w);
     std::vector<std::uint8_t> valid(heights.size());
     for (int j = 0; j < w; ++j) {
+        if (j % 32 == 0) {
+            checkpoint(j == 0 ? "reading its heights" : "reading more of its heights");
+        }
         const LatticeBlock row =
             layer.sample(Scheme::Mercator, id.z, lattice, c0, r0 + 2 * j, 2 * w - 1, 1);
         for (int i = 0; i < w; ++i) {
@@ -199,12 +208,14 @@ std::vector<double> dem_tile_heights(const Layer& layer, const ValidTile& tile) 
             out[static_cast<std::size_t>(j) * p + i] = h;
         }
     }
+    checkpoint("encoding");
     return out;
 }
 
-std::string make_dem_tile(const Layer& layer, const ValidTile& tile, Format format) {
+std::string
+make_dem_tile(const Layer& layer, const ValidTile& tile, Format format, const CancelFn& cancelled) {
     TB_ASSERT(is_dem_format(format));
-    const std::vector<double> heights = dem_tile_heights(layer, tile);
+    const std::vector<double> heights = dem_tile_heights(layer, tile, cancelled);
     const int p = layer.options().dem_tile_size;
     return encode_dem_png(heights, p, p, format);
 }

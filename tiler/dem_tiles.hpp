@@ -40,10 +40,15 @@ TileRange dem_tiles_at(const Layer& layer, int z);
 
 // The P x P heights of a DEM tile (row 0 at the north), metres, before encoding. The tile is
 // a mercator one (asserted; ValidTile::parse(Scheme::Mercator, id) where a request names it),
-// whatever the layer's scheme. Throws NotFound beyond the zooms or the data.
-std::vector<double> dem_tile_heights(const Layer& layer, const ValidTile& tile);
+// whatever the layer's scheme. Throws NotFound beyond the zooms or the data, and Cancelled when
+// `cancelled` says so (asked before reading, every 32 rows read, and before returning).
+std::vector<double>
+dem_tile_heights(const Layer& layer, const ValidTile& tile, const CancelFn& cancelled = {});
 // The tile as PNG in `format` (Terrarium or Mapbox). Same errors as dem_tile_heights.
-std::string make_dem_tile(const Layer& layer, const ValidTile& tile, Format format);
+std::string make_dem_tile(const Layer& layer,
+                          const ValidTile& tile,
+                          Format format,
+                          const CancelFn& cancelled = {});
 
 DemHeights parse_dem_heights(const std::string& name); // "sea_level" | "ellipsoid"
 const char* to_string(DemHeights heights);

@@ -440,6 +440,28 @@ TEST_CASE("an ellipsoidal source loses the undulation at sea level and keeps its
     CHECK(measured > 10000u);
 }
 
+TEST_CASE("a DEM tile stops with Cancelled at a checkpoint once its CancelFn says so, and is the "
+          "same tile when it never does") {
+    ScratchDir dir;
+    const auto layer = open_dem_layer(write_test_dem(dir), DemHeights::SeaLevel);
+    const int z = dem_tile_plan(*layer).max_zoom;
+    const TileRange r = dem_tiles_at(*layer, z);
+    const ValidTile tile = ValidTile::parse(Scheme::Mercator, TileId{z, r.x0, r.y0});
+    const std::string whole = make_dem_tile(*layer, tile, Format::Terrarium);
+    int asked = 0;
+    const auto never = [&] { return ++asked, false; };
+    CHECK(make_dem_tile(*layer, tile, Format::Terrarium, never) == whole);
+    // Before reading, every 32 of the 512 + 2 margin rows, and before encoding.
+    CHECK(asked == (512 + 2 * kDemFillMargin + 31) / 32 + 1);
+    for (const int stop_at : {1, 3, asked}) {
+        CAPTURE(stop_at);
+        int n = 0;
+        const auto at = [&] { return ++n == stop_at; };
+        CHECK_THROWS_AS(make_dem_tile(*layer, tile, Format::Terrarium, at), Cancelled);
+        CHECK(n == stop_at);
+    }
+}
+
 TEST_CASE("DEM tiles outside EPSG:3857, the zooms or the data are refused with the right error") {
     ScratchDir dir;
     const auto layer = open_dem_layer(write_test_dem(dir));
