@@ -10,21 +10,38 @@
 #include "tests/core/brute_force.hpp"
 #include "tests/core/terrains.hpp"
 
+namespace {
+
+// A random scan line of seed `seed`: 2 + up to `spread` samples of noise (a slope on odd seeds),
+// every third seed with a validity mask, and an eps drawn after the samples. Non-dyadic eps keeps
+// samples off the exact tunnel wall.
+struct RandomLine {
+    std::vector<float> z;
+    std::vector<std::uint8_t> valid;
+    double eps = 0;
+};
+
+RandomLine random_line(std::uint64_t seed, int spread) {
+    terrain::Lcg r(seed);
+    RandomLine line;
+    const int n = 2 + static_cast<int>(r.next() * spread);
+    const bool masked = seed % 3 == 0;
+    for (int k = 0; k < n; ++k) {
+        line.z.push_back(terrain::quantize(r.next() * 10.0 + (seed % 2 ? k * 1.7 : 0.0)));
+        if (masked) {
+            line.valid.push_back(r.next() < 0.7 ? 1 : 0);
+        }
+    }
+    line.eps = 0.3 + 3.1 * r.next();
+    return line;
+}
+
+} // namespace
+
 TEST_CASE("the 1-D fit has the brute-force optimal count on random sequences (seeds 1-300)") {
     for (std::uint64_t seed = 1; seed <= 300; ++seed) {
-        terrain::Lcg r(seed);
-        const int n = 2 + static_cast<int>(r.next() * 12);
-        std::vector<float> z;
-        std::vector<std::uint8_t> valid;
-        const bool masked = seed % 3 == 0;
-        for (int k = 0; k < n; ++k) {
-            z.push_back(terrain::quantize(r.next() * 10.0 + (seed % 2 ? k * 1.7 : 0.0)));
-            if (masked) {
-                valid.push_back(r.next() < 0.7 ? 1 : 0);
-            }
-        }
-        // Non-dyadic eps keeps samples off the exact tunnel wall.
-        const double eps = 0.3 + 3.1 * r.next();
+        const auto [z, valid, eps] = random_line(seed, 12);
+        const int n = static_cast<int>(z.size());
         const auto chain = tb::core::fit_breakpoints(z, valid, eps);
         INFO("seed=", seed, " n=", n, " eps=", eps);
         REQUIRE(chain.front() == 0);
@@ -126,20 +143,9 @@ TEST_CASE("the 1-D fit has the optimal count on hand-made cases") {
 TEST_CASE("the greedy chain stays in the eps tunnel with no fewer breakpoints than the optimum "
           "(seeds 1-300)") {
     for (std::uint64_t seed = 1; seed <= 300; ++seed) {
-        terrain::Lcg r(seed);
-        const int n = 2 + static_cast<int>(r.next() * 40);
-        std::vector<float> z;
-        std::vector<std::uint8_t> valid;
-        const bool masked = seed % 3 == 0;
-        for (int k = 0; k < n; ++k) {
-            z.push_back(terrain::quantize(r.next() * 10.0 + (seed % 2 ? k * 1.7 : 0.0)));
-            if (masked) {
-                valid.push_back(r.next() < 0.7 ? 1 : 0);
-            }
-        }
-        // Non-dyadic eps keeps samples off the tunnel wall, where the greedy chain's
-        // cross-multiplied test and the exact one may differ in the last bit.
-        const double eps = 0.3 + 3.1 * r.next();
+        // Off the tunnel wall, the greedy chain's cross-multiplied test and the exact one agree.
+        const auto [z, valid, eps] = random_line(seed, 40);
+        const int n = static_cast<int>(z.size());
         const int max_step = seed % 4 == 0 ? 3 : 0;
         const auto chain = tb::core::greedy_breakpoints(z, valid, eps, max_step);
         INFO("seed=", seed, " n=", n, " eps=", eps, " max_step=", max_step);
