@@ -8,11 +8,13 @@
 //   TB_DEM         DEM to serve (default: data/N57E011.hgt, fetched by scripts/setup.sh)
 //   TB_CHROMIUM    browser executable (default /usr/bin/chromium, Debian's package)
 //   TB_ARTIFACTS   where screenshots go (default tests/artifacts)
+//   TB_NGINX       nginx executable for the static-hosting tests (default /usr/sbin/nginx)
 import { spawn, execFile } from 'node:child_process';
 import { createRequire } from 'node:module';
 import fs from 'node:fs';
 import fsp from 'node:fs/promises';
 import http from 'node:http';
+import net from 'node:net';
 import os from 'node:os';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
@@ -138,23 +140,24 @@ const MIME = {
 // GET /web/<path> -> web/<path>. Used only while terrabound does not serve /web itself.
 export async function startStaticWeb() {
   const root = fs.realpathSync(WEB);
+  return startFileServer(async (pathname) => {
+    let rel = null;
+    if (pathname === '/') rel = 'index.html';
+    else if (pathname.startsWith('/web/')) rel = decodeURIComponent(pathname.slice(5));
+    const file = rel === null ? null : fileUnder(root, rel);
+    return file && { body: await fsp.readFile(file), type: MIME[path.extname(file)] || 'application/octet-stream' };
+  });
+}
+
+// An HTTP server on a free loopback port answering GET and HEAD with what `route(pathname)`
+// resolves to ({ body, type }), and 404 where that is null or throws; stop() closes it.
+export async function startFileServer(route) {
   const server = http.createServer(async (req, res) => {
     try {
-      const u = new URL(req.url, 'http://127.0.0.1');
-      let rel = null;
-      if (u.pathname === '/') rel = 'index.html';
-      else if (u.pathname.startsWith('/web/')) rel = decodeURIComponent(u.pathname.slice(5));
-      const file = rel === null ? null : path.resolve(root, rel);
-      if (!file || !file.startsWith(root + path.sep)) {
-        res.writeHead(404, { 'Content-Type': 'text/plain' }).end('not found');
-        return;
-      }
-      const data = await fsp.readFile(file);
-      res.writeHead(200, {
-        'Content-Type': MIME[path.extname(file)] || 'application/octet-stream',
-        'Content-Length': data.length,
-      });
-      res.end(req.method === 'HEAD' ? undefined : data);
+      const found = await route(new URL(req.url, 'http://127.0.0.1').pathname);
+      if (!found) throw new Error('not found');
+      res.writeHead(200, { 'Content-Type': found.type, 'Content-Length': Buffer.byteLength(found.body) });
+      res.end(req.method === 'HEAD' ? undefined : found.body);
     } catch {
       res.writeHead(404, { 'Content-Type': 'text/plain' }).end('not found');
     }
@@ -164,6 +167,51 @@ export async function startStaticWeb() {
     url: `http://127.0.0.1:${server.address().port}`,
     stop: () => new Promise((resolve) => { server.closeAllConnections(); server.close(resolve); }),
   };
+}
+
+// `rel` resolved under the directory `root` (a real path), or null when it would leave it.
+export function fileUnder(root, rel) {
+  const file = path.resolve(root, rel);
+  return file.startsWith(root + path.sep) ? file : null;
+}
+
+// A TCP port free on 127.0.0.1 a moment ago.
+export async function freePort() {
+  const server = net.createServer();
+  await new Promise((resolve) => server.listen(0, '127.0.0.1', resolve));
+  const { port } = server.address();
+  await new Promise((resolve) => server.close(resolve));
+  return port;
+}
+
+export const NGINX = process.env.TB_NGINX || '/usr/sbin/nginx';
+
+// nginx in the foreground (no root needed: its pid, temp paths and error log are under `dir`,
+// which it creates) with `serverBlock` in its http block, listening on 127.0.0.1:port. Resolves
+// once `readyPath` answers (with a 2xx when `ok`) to { child, url, log, exited }.
+export async function startNginx(dir, serverBlock, port, { readyPath = '/', ok = false } = {}) {
+  await fsp.mkdir(dir);
+  const conf = path.join(dir, 'nginx.conf');
+  const temp = (name) => `${name}_temp_path ${path.join(dir, name)};`;
+  await fsp.writeFile(conf, [
+    'daemon off;', 'worker_processes 1;', `pid ${path.join(dir, 'nginx.pid')};`,
+    'error_log stderr warn;', 'events { worker_connections 256; }',
+    'http {', 'access_log off;',
+    ...['client_body', 'proxy', 'fastcgi', 'uwsgi', 'scgi'].map(temp),
+    serverBlock, '}', ''].join('\n'));
+  const child = spawn(NGINX, ['-p', dir, '-c', conf, '-e', 'stderr'], { stdio: ['ignore', 'pipe', 'pipe'] });
+  const state = { child, url: `http://127.0.0.1:${port}`, log: '', exited: false };
+  child.stdout.on('data', (d) => { state.log += d; });
+  child.stderr.on('data', (d) => { state.log += d; });
+  child.on('exit', () => { state.exited = true; });
+  for (let i = 0; i < 100; ++i) {
+    if (state.exited) throw new Error(`nginx exited:\n${state.log}\nwith:\n${serverBlock}`);
+    const res = await fetch(`${state.url}${readyPath}`).catch(() => null);
+    if (res && (!ok || res.ok)) return state;
+    await sleep(50);
+  }
+  child.kill('SIGTERM');
+  throw new Error(`nginx did not answer:\n${state.log}`);
 }
 
 // Where the pages come from: terrabound itself when it mounts /web (the lead's static route),

@@ -16,17 +16,14 @@ import { test, after } from 'node:test';
 import assert from 'node:assert/strict';
 import fs from 'node:fs';
 import fsp from 'node:fs/promises';
-import net from 'node:net';
 import os from 'node:os';
 import path from 'node:path';
-import http from 'node:http';
-import { spawn } from 'node:child_process';
 import {
   REPO, WEB, DEM, TB_BINARY, missingPrerequisite, startTerrabound, launchBrowser,
-  openPage, describeRecord, fetchJson, execFileP, sleep,
+  openPage, describeRecord, fetchJson, execFileP, NGINX, startNginx, startFileServer, fileUnder,
+  freePort,
 } from './helpers.mjs';
 
-const NGINX = process.env.TB_NGINX || '/usr/sbin/nginx';
 const README_ORIGIN = 'http://127.0.0.1:8080';  // what the js snippets point at (`make run`)
 const SRV = '/srv/tiles';                        // where the build example writes
 const NODE_MODULES = path.join(WEB, 'node_modules');
@@ -89,14 +86,6 @@ async function workDir() {
 after(async () => {
   for (const f of cleanups.reverse()) await f().catch(() => {});
 });
-
-async function freePort() {
-  const server = net.createServer();
-  await new Promise((resolve) => server.listen(0, '127.0.0.1', resolve));
-  const { port } = server.address();
-  await new Promise((resolve) => server.close(resolve));
-  return port;
-}
 
 // --- ```sh -------------------------------------------------------------------------------
 
@@ -167,32 +156,11 @@ for (const l of shLines) {
 
 // --- ```nginx ----------------------------------------------------------------------------
 
-// nginx in the foreground (no root needed: own pid, temp paths and error log) with the README's
-// server block in its http block, listening on 127.0.0.1:port.
-async function startNginx(serverBlock, port) {
-  const dir = path.join(work, `nginx-${port}`);
-  await fsp.mkdir(dir);
-  const conf = path.join(dir, 'nginx.conf');
-  const temp = (name) => `${name}_temp_path ${path.join(dir, name)};`;
-  await fsp.writeFile(conf, [
-    'daemon off;', 'worker_processes 1;', `pid ${path.join(dir, 'nginx.pid')};`,
-    'error_log stderr warn;', 'events { worker_connections 256; }',
-    'http {', 'access_log off;',
-    ...['client_body', 'proxy', 'fastcgi', 'uwsgi', 'scgi'].map(temp),
-    serverBlock, '}', ''].join('\n'));
-  const child = spawn(NGINX, ['-p', dir, '-c', conf, '-e', 'stderr'], { stdio: ['ignore', 'pipe', 'pipe'] });
-  const state = { child, url: `http://127.0.0.1:${port}`, log: '', exited: false };
-  child.stdout.on('data', (d) => { state.log += d; });
-  child.stderr.on('data', (d) => { state.log += d; });
-  child.on('exit', () => { state.exited = true; });
-  cleanups.push(async () => { if (!state.exited) child.kill('SIGTERM'); });
-  for (let i = 0; i < 100; ++i) {
-    if (state.exited) throw new Error(`nginx exited:\n${state.log}\nwith:\n${serverBlock}`);
-    const res = await fetch(`${state.url}/`).catch(() => null);
-    if (res) return state;
-    await sleep(50);
-  }
-  throw new Error(`nginx did not answer:\n${state.log}`);
+// nginx with the README's server block, listening on 127.0.0.1:port; stopped at the end.
+async function startReadmeNginx(serverBlock, port) {
+  const state = await startNginx(path.join(work, `nginx-${port}`), serverBlock, port);
+  cleanups.push(async () => { if (!state.exited) state.child.kill('SIGTERM'); });
+  return state;
 }
 
 for (const b of blocks.filter((x) => x.lang === 'nginx')) {
@@ -207,7 +175,7 @@ for (const b of blocks.filter((x) => x.lang === 'nginx')) {
       const port = await freePort();
       assert.match(b.body, /\blisten\s+80\s*;/, 'the block listens on port 80');
       const block = b.body.replace(/\blisten\s+80\s*;/, `listen 127.0.0.1:${port};`).split(SRV).join(buildOut);
-      const nginx = await startNginx(block, port);
+      const nginx = await startReadmeNginx(block, port);
       const doc = await fetchJson(`${nginx.url}/${layer}/layer.json`);
       assert.equal(doc.format, 'quantized-mesh-1.0');
       const tile = await fetch(`${nginx.url}/${layer}/0/0/0.terrain`);
@@ -261,30 +229,13 @@ const MIME = {
 };
 async function startPages() {
   const roots = { '/web/': fs.realpathSync(WEB), '/draco/': path.join(NODE_MODULES, 'three', 'examples', 'jsm', 'libs', 'draco') };
-  const server = http.createServer(async (req, res) => {
-    try {
-      const u = new URL(req.url, 'http://127.0.0.1');
-      let body = pagesHtml.get(u.pathname);
-      let type = MIME['.html'];
-      if (body === undefined) {
-        const prefix = Object.keys(roots).find((p) => u.pathname.startsWith(p));
-        const root = prefix && fs.realpathSync(roots[prefix]);
-        const file = prefix && path.resolve(root, decodeURIComponent(u.pathname.slice(prefix.length)));
-        if (!file || !file.startsWith(root + path.sep)) throw new Error('not found');
-        body = await fsp.readFile(file);
-        type = MIME[path.extname(file)] || 'application/octet-stream';
-      }
-      res.writeHead(200, { 'Content-Type': type, 'Content-Length': Buffer.byteLength(body) });
-      res.end(req.method === 'HEAD' ? undefined : body);
-    } catch {
-      res.writeHead(404, { 'Content-Type': 'text/plain' }).end('not found');
-    }
+  return startFileServer(async (pathname) => {
+    const html = pagesHtml.get(pathname);
+    if (html !== undefined) return { body: html, type: MIME['.html'] };
+    const prefix = Object.keys(roots).find((p) => pathname.startsWith(p));
+    const file = prefix && fileUnder(fs.realpathSync(roots[prefix]), decodeURIComponent(pathname.slice(prefix.length)));
+    return file && { body: await fsp.readFile(file), type: MIME[path.extname(file)] || 'application/octet-stream' };
   });
-  await new Promise((resolve) => server.listen(0, '127.0.0.1', resolve));
-  return {
-    url: `http://127.0.0.1:${server.address().port}`,
-    stop: () => new Promise((resolve) => { server.closeAllConnections(); server.close(resolve); }),
-  };
 }
 
 let clientsReady = null;

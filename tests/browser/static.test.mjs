@@ -7,16 +7,13 @@ import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import fs from 'node:fs';
 import fsp from 'node:fs/promises';
-import net from 'node:net';
 import os from 'node:os';
 import path from 'node:path';
-import { spawn } from 'node:child_process';
 import {
   DEM, TB_BINARY, missingPrerequisite, startStaticWeb, launchBrowser, openPage, describeRecord,
-  fetchJson, execFileP, sleep,
+  fetchJson, execFileP, NGINX, startNginx, freePort,
 } from './helpers.mjs';
 
-const NGINX = process.env.TB_NGINX || '/usr/sbin/nginx';
 // build's default layer name, the one `serve DEM` gives it: the file's name without extensions.
 const LAYER = path.basename(DEM).split('.')[0];
 const skip = missingPrerequisite({ browser: true }) ||
@@ -27,39 +24,10 @@ let nginx = null;  // { child, url, log }
 let pages = null;
 let browser = null;
 
-async function freePort() {
-  const server = net.createServer();
-  await new Promise((resolve) => server.listen(0, '127.0.0.1', resolve));
-  const { port } = server.address();
-  await new Promise((resolve) => server.close(resolve));
-  return port;
-}
-
-// nginx in the foreground on 127.0.0.1:port, serving `root` with the build's snippet.
-async function startNginx(root, port) {
-  const dir = path.join(work, 'nginx');
-  await fsp.mkdir(dir);
-  const conf = path.join(dir, 'nginx.conf');
-  const temp = (name) => `${name}_temp_path ${path.join(dir, name)};`;
-  await fsp.writeFile(conf, [
-    'daemon off;', 'worker_processes 1;', `pid ${path.join(dir, 'nginx.pid')};`,
-    'error_log stderr warn;', 'events { worker_connections 256; }',
-    'http {', 'access_log off;',
-    ...['client_body', 'proxy', 'fastcgi', 'uwsgi', 'scgi'].map(temp),
-    `server { listen 127.0.0.1:${port}; root ${root}; include ${path.join(root, 'terrabound-nginx.conf')}; }`,
-    '}', ''].join('\n'));
-  const child = spawn(NGINX, ['-p', dir, '-c', conf, '-e', 'stderr'], { stdio: ['ignore', 'pipe', 'pipe'] });
-  const state = { child, url: `http://127.0.0.1:${port}`, log: '', exited: false };
-  child.stdout.on('data', (d) => { state.log += d; });
-  child.stderr.on('data', (d) => { state.log += d; });
-  child.on('exit', () => { state.exited = true; });
-  for (let i = 0; i < 100; ++i) {
-    if (state.exited) throw new Error(`nginx exited:\n${state.log}`);
-    const res = await fetch(`${state.url}/${LAYER}/layer.json`).catch(() => null);
-    if (res && res.ok) return state;
-    await sleep(50);
-  }
-  throw new Error(`nginx did not answer:\n${state.log}`);
+// nginx on 127.0.0.1:port, serving `root` with the build's snippet.
+function startStaticNginx(root, port) {
+  const block = `server { listen 127.0.0.1:${port}; root ${root}; include ${path.join(root, 'terrabound-nginx.conf')}; }`;
+  return startNginx(path.join(work, 'nginx'), block, port, { readyPath: `/${LAYER}/layer.json`, ok: true });
 }
 
 before(async () => {
@@ -71,7 +39,7 @@ before(async () => {
   // Default formats and layer name: what a newcomer gets.
   await execFileP(TB_BINARY, ['build', DEM, '-o', out, '--base-url', `http://127.0.0.1:${port}`,
     '--summary-dir', 'off'], { maxBuffer: 1 << 26 });
-  nginx = await startNginx(out, port);
+  nginx = await startStaticNginx(out, port);
   pages = await startStaticWeb();
   browser = await launchBrowser({ width: 960, height: 640 });
 });
