@@ -22,6 +22,13 @@ std::string tile_text(const TileId& id) {
     return std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
 }
 
+// Binds ?1, ?2, ?3 to the zoom, column and TMS row of the XYZ tile `id`.
+void bind_position(sqlite3_stmt* s, const TileId& id) {
+    sqlite3_bind_int(s, 1, id.z);
+    sqlite3_bind_int64(s, 2, id.x);
+    sqlite3_bind_int64(s, 3, rows_at(id.z) - 1 - id.y);
+}
+
 // A tile row joined with its checksum: data, then crc (NULL for a tile another program wrote).
 constexpr const char* kTileWithCrc =
     "SELECT t.zoom_level, t.tile_column, t.tile_row, t.tile_data, c.crc FROM tiles t"
@@ -155,9 +162,7 @@ std::optional<std::string> MbtilesStore::get(const TileKey& key) const {
         return std::nullopt;
     }
     SqliteReset reset{get_.get()};
-    sqlite3_bind_int(get_.get(), 1, key.id.z);
-    sqlite3_bind_int64(get_.get(), 2, key.id.x);
-    sqlite3_bind_int64(get_.get(), 3, rows_at(key.id.z) - 1 - key.id.y);
+    bind_position(get_.get(), key.id);
     if (db_.step(get_.get(), "read a tile") != SQLITE_ROW) {
         return std::nullopt;
     }
@@ -174,15 +179,11 @@ std::optional<std::string> MbtilesStore::get(const TileKey& key) const {
 void MbtilesStore::put_locked(const TileKey& key, std::string_view bytes) {
     claim(key.layer, key.format);
     SqliteReset reset{put_.get()};
-    sqlite3_bind_int(put_.get(), 1, key.id.z);
-    sqlite3_bind_int64(put_.get(), 2, key.id.x);
-    sqlite3_bind_int64(put_.get(), 3, rows_at(key.id.z) - 1 - key.id.y);
+    bind_position(put_.get(), key.id);
     SqliteDb::bind_blob(put_.get(), 4, bytes);
     db_.step(put_.get(), "write a tile");
     SqliteReset reset_crc{put_crc_.get()};
-    sqlite3_bind_int(put_crc_.get(), 1, key.id.z);
-    sqlite3_bind_int64(put_crc_.get(), 2, key.id.x);
-    sqlite3_bind_int64(put_crc_.get(), 3, rows_at(key.id.z) - 1 - key.id.y);
+    bind_position(put_crc_.get(), key.id);
     sqlite3_bind_int64(put_crc_.get(), 4, store_checksum(bytes));
     db_.step(put_crc_.get(), "write a tile's checksum");
 }
