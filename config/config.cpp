@@ -387,7 +387,8 @@ void parse_layer(Checker& check,
                       "nodata",
                       "effort",
                       "summary_dir",
-                      "valid_range"});
+                      "valid_range",
+                      "priority"});
     tiler::LayerOptions& o = out.options;
 
     if (!value.contains("name")) {
@@ -419,16 +420,13 @@ void parse_layer(Checker& check,
                 continue;
             }
             const std::string path = resolve(base_dir, *s);
-            if (!is_gdal_name(path)) {
-                std::error_code ec;
-                if (!fs::exists(path, ec)) {
-                    check.error(pi, "file not found: " + path);
-                    continue;
-                }
-                if (fs::is_directory(path, ec)) {
-                    check.error(pi, "is a directory, expected a DEM file: " + path);
-                    continue;
-                }
+            // A directory, a list file or a glob names a collection: expanded when the layer
+            // opens (tiler/sources/source_list.hpp), which reports what it finds wrong.
+            const bool glob = path.find_first_of("*?[") != std::string::npos;
+            std::error_code ec;
+            if (!is_gdal_name(path) && !glob && !fs::exists(path, ec)) {
+                check.error(pi, "file not found: " + path);
+                continue;
             }
             o.sources.push_back(path);
         }
@@ -541,6 +539,15 @@ void parse_layer(Checker& check,
     }
     parse_summary_dir(check, value, at, base_dir, o);
     parse_valid_range(check, value, at, o);
+    if (value.contains("priority")) {
+        if (auto s = check.string(value["priority"], at + "/priority")) {
+            try {
+                o.priority = tiler::parse_source_priority(*s, at + "/priority");
+            } catch (const InputError& e) {
+                check.error(at + "/priority", e.what());
+            }
+        }
+    }
     if (value.contains("store") && !value["store"].is_null()) {
         const std::string p = at + "/store";
         if (!value["store"].is_string()) {

@@ -235,6 +235,9 @@ int run(const Args& args) {
     if (auto v = args.get("valid-range")) {
         o.layer.valid_range = tiler::parse_valid_range(*v, "build: --valid-range");
     }
+    if (auto v = args.get("priority")) {
+        o.layer.priority = tiler::parse_source_priority(*v, "build: --priority");
+    }
     if (auto v = args.get("bbox")) {
         o.bbox = parse_bbox(*v);
     }
@@ -361,6 +364,7 @@ const Command& build_command() {
               "fewest triangles"},
              {"summary-dir", "DIR", kSummaryDirHelp},
              {"valid-range", "MIN,MAX", kValidRangeHelp},
+             {"priority", "finest|listed", kPriorityHelp},
              {"threads", "N", "worker threads (default: one per usable core)"},
              {"resume", "", "continue a build: same parameters, tiles already there are kept"},
              {"force", "", "delete the layer's existing tiles and documents first"},

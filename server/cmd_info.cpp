@@ -3,6 +3,7 @@
 #include "server/commands.hpp"
 #include "tiler/layer.hpp"
 #include "tiler/sources/gdal_source.hpp"
+#include "tiler/sources/source_list.hpp"
 
 #include <cmath>
 #include <cstdio>
@@ -109,27 +110,40 @@ std::string describe_zoom(const tiler::Layer& layer, int z) {
            ", checked at full resolution";
 }
 
-// The pyramid a layer of this DEM would have: zooms, tiles per zoom, eps per zoom, and what
+// How the DEMs of a collection rank: the first with a valid pixel wins at each point.
+std::string describe_ranks(const tiler::DemSource& source, tiler::SourcePriority priority) {
+    std::ostringstream out;
+    out.precision(6);
+    const auto parts = source.parts();
+    out << "collection of " << parts.size() << " DEM groups, ranked " << to_string(priority)
+        << " (where they overlap the first with data wins; the others fill its voids):\n";
+    for (std::size_t k = 0; k < parts.size(); ++k) {
+        const tiler::DemInfo& d = *parts[k];
+        out << "  " << k + 1 << ". " << d.path << ": " << d.resolution_m << " m pixels, "
+            << (d.crs_id.empty() ? d.crs_name : d.crs_id);
+        if (d.lonlat_bounds) {
+            const auto& b = *d.lonlat_bounds;
+            out << ", lon " << b[0] << " .. " << b[2] << ", lat " << b[1] << " .. " << b[3];
+        }
+        out << "\n";
+    }
+    return out.str();
+}
+
+// The pyramid a layer of these DEMs would have: zooms, tiles per zoom, eps per zoom, and what
 // each zoom reads of the source.
-std::string describe_pyramid(const std::string& path,
-                             tiler::Scheme scheme,
-                             std::optional<double> nodata,
-                             const std::string& summary_dir,
-                             const tiler::ValidRange& range) {
+std::string describe_pyramid(const tiler::LayerOptions& options) {
     std::ostringstream out;
     out.precision(6);
     std::shared_ptr<const tiler::Layer> layer;
     try {
-        tiler::LayerOptions options;
-        options.sources = {path};
-        options.scheme = scheme;
-        options.nodata = nodata;
-        options.summary_dir = summary_dir;
-        options.valid_range = range;
         layer = tiler::Layer::open(options);
     } catch (const InputError& e) {
         out << "  pyramid:     none (" << e.what() << ")\n";
         return out.str();
+    }
+    if (layer->source().parts().size() > 1) {
+        out << describe_ranks(layer->source(), options.priority);
     }
     const auto& o = layer->options();
     const auto b = layer->data_bounds();
@@ -180,12 +194,27 @@ int run(const Args& args) {
     if (auto v = args.get("valid-range")) {
         range = tiler::parse_valid_range(*v, "info: --valid-range");
     }
-    const std::string summary_dir = args.get("summary-dir").value_or("");
-    for (const auto& path : args.positional) {
+    tiler::LayerOptions options;
+    options.scheme = scheme;
+    options.nodata = nodata;
+    options.summary_dir = args.get("summary-dir").value_or("");
+    options.valid_range = range;
+    if (auto v = args.get("priority")) {
+        options.priority = tiler::parse_source_priority(*v, "info: --priority");
+    }
+    const std::vector<std::string> paths = tiler::expand_dem_inputs(args.positional);
+    for (const auto& path : paths) {
         std::fputs(
             describe(tiler::inspect_dem(path, tiler::kExactRangeSamples, nodata, range)).c_str(),
             stdout);
-        std::fputs(describe_pyramid(path, scheme, nodata, summary_dir, range).c_str(), stdout);
+        if (paths.size() == 1) {
+            options.sources = {path};
+            std::fputs(describe_pyramid(options).c_str(), stdout);
+        }
+    }
+    if (paths.size() > 1) { // one collection: one pyramid
+        options.sources = paths;
+        std::fputs(describe_pyramid(options).c_str(), stdout);
     }
     return 0;
 }
@@ -196,11 +225,13 @@ const Command& info_command() {
     static const Command command{
         {"info",
          "DEM...",
-         "Describe a DEM: size, CRS, data type, nodata, height range, resolution, pyramid.",
+         "Describe a DEM: size, CRS, data type, nodata, height range, resolution, pyramid;\n"
+         "several DEMs: each of them, then how they rank and the pyramid of them together.",
          {{"scheme", "NAME", "pyramid plan for geodetic (default) or mercator tiles"},
           {"nodata", "V", "raw sample value to treat as nodata, replacing the file's own"},
           {"summary-dir", "DIR", kSummaryDirHelp},
-          {"valid-range", "MIN,MAX", kValidRangeHelp}},
+          {"valid-range", "MIN,MAX", kValidRangeHelp},
+          {"priority", "finest|listed", kPriorityHelp}},
          "The pyramid plan is what 'terrabound build' and 'serve' make of the DEM alone with\n"
          "default options: zoom range, tiles per zoom, each zoom's eps (metres), how that eps\n"
          "is made true at the DEM's own pixels (the guarantee), and what its tiles read: the\n"

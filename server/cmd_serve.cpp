@@ -10,6 +10,7 @@
 #include "tiler/log.hpp"
 #include "tiler/pyramid/tile_settings.hpp"
 #include "tiler/sources/gdal_source.hpp"
+#include "tiler/sources/source_list.hpp"
 #include "tiler/stores/store.hpp"
 
 #include <malloc.h>
@@ -139,18 +140,6 @@ std::size_t split_memory(const config::ServerConfig& server, int threads) {
     }
     log::info(line);
     return cache_mb << 20;
-}
-
-// A layer's sources for a log line: the first three, and how many more.
-std::string sources_text(const std::vector<std::string>& sources) {
-    std::string text;
-    for (std::size_t i = 0; i < sources.size() && i < 3; ++i) {
-        text += (i ? ", " : "") + sources[i];
-    }
-    if (sources.size() > 3) {
-        text += " and " + std::to_string(sources.size() - 3) + " more";
-    }
-    return text;
 }
 
 // No layer opened: `first` (the first layer's failure) alone for a single layer, as before;
@@ -328,6 +317,12 @@ config::Config load_serve_config(const Args& args) {
             layer.options.valid_range = range;
         }
     }
+    if (auto v = args.get("priority")) {
+        const auto priority = tiler::parse_source_priority(*v, "serve: --priority");
+        for (auto& layer : cfg.layers) {
+            layer.options.priority = priority;
+        }
+    }
     log::Level level = log::Level::Info;
     if (log::parse_level(cfg.server.log_level, level)) {
         log::set_level(level);
@@ -356,7 +351,7 @@ OpenedLayers open_layers(const config::Config& cfg) {
             s = server::open_served_layer(layer);
         } catch (const Error& e) {
             failures.push_back("layer " + layer.options.name + " (" +
-                               sources_text(layer.options.sources) + "): " + e.what());
+                               tiler::inputs_text(layer.options.sources) + "): " + e.what());
             opened.unavailable.push_back({layer.options.name, e.what()});
             if (!first_failure) {
                 first_failure = std::current_exception();
@@ -470,6 +465,7 @@ const Command& serve_command() {
            "mesher effort of every layer (the config's effort): fast, balanced (default) or best"},
           {"summary-dir", "DIR", kSummaryDirHelp},
           {"valid-range", "MIN,MAX", kValidRangeHelp},
+          {"priority", "finest|listed", kPriorityHelp},
           {"store",
            "PATH",
            "keep generated tiles in this store for every layer: a directory, or a file "

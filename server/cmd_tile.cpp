@@ -58,6 +58,9 @@ int run(const Args& args) {
     if (auto v = args.get("valid-range")) {
         options.valid_range = tiler::parse_valid_range(*v, "tile: --valid-range");
     }
+    if (auto v = args.get("priority")) {
+        options.priority = tiler::parse_source_priority(*v, "tile: --priority");
+    }
     const auto layer = tiler::Layer::open(options);
     const double eps = args.has("eps") ? args.get_double("eps", 0) : layer->eps_for_zoom(tile.z());
     tiler::check_eps(eps, "tile: --eps");
@@ -128,6 +131,7 @@ const Command& tile_command() {
               "fewest triangles"},
              {"summary-dir", "DIR", kSummaryDirHelp},
              {"valid-range", "MIN,MAX", kValidRangeHelp},
+             {"priority", "finest|listed", kPriorityHelp},
          },
          "Outputs: .glb (glTF + Draco, ECEF), .drc (Draco, local ENU), .obj (the mesh in the\n"
          "grid coordinates of the samples it was meshed on: v column row height, heights above\n"

@@ -21,6 +21,11 @@ inline constexpr const char* kSummaryDirHelp =
 inline constexpr const char* kValidRangeHelp =
     "heights outside MIN,MAX metres count as nodata (default -12000,9000)";
 
+// --priority, as serve, build, tile and info take it (LayerOptions::priority).
+inline constexpr const char* kPriorityHelp =
+    "where DEMs overlap: 'finest' (default) lets the finer one win, 'listed' the first given; "
+    "the others fill its voids";
+
 const Command& serve_command();
 const Command& build_command();
 const Command& tile_command();

@@ -4,6 +4,7 @@
 #include "tiler/formats/quantized_mesh.hpp"
 #include "tiler/log.hpp"
 #include "tiler/pyramid/tile_settings.hpp"
+#include "tiler/sources/source_list.hpp"
 
 #include <filesystem>
 #include <sys/stat.h>
@@ -53,7 +54,13 @@ void attach_store(ServedLayer& served, const config::LayerConfig& layer, Stores&
 
 std::vector<std::string> source_stamps(const std::vector<std::string>& sources) {
     std::vector<std::string> stamps;
-    for (const auto& path : sources) {
+    std::vector<std::string> files;
+    try {
+        files = tiler::expand_dem_inputs(sources); // a file added to a directory is a change
+    } catch (const InputError&) {
+        files = sources; // the reload that follows reports it
+    }
+    for (const auto& path : files) {
         struct stat st {};
         if (::stat(path.c_str(), &st) != 0) {
             stamps.emplace_back("-");

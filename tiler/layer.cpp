@@ -17,6 +17,7 @@
 #include "tiler/sources/gdal_source.hpp"
 #include "tiler/sources/geoid.hpp"
 #include "tiler/sources/lattice_raster.hpp"
+#include "tiler/sources/source_list.hpp"
 #include "tiler/summary/dem_summary.hpp"
 #include "tiler/summary/summary_tile.hpp"
 
@@ -65,7 +66,8 @@ void validate_options(const LayerOptions& o) {
 // The layer's sources, opened once its options are checked: georeferenced and holding data.
 std::shared_ptr<const DemSource> open_source(const LayerOptions& options) {
     validate_options(options);
-    auto source = DemSource::open(options.sources, options.nodata, options.valid_range);
+    auto source =
+        DemSource::open(options.sources, options.nodata, options.valid_range, options.priority);
     const DemInfo& info = source->info();
     if (!source->georeferenced()) {
         throw InputError(info.path + ": has no georeferencing; tiles need a CRS and a "
@@ -127,6 +129,7 @@ public:
     double eps_for_zoom(int z) const override { return plan_.eps_for_zoom(z); }
     double terrain_eps_for_zoom(int z) const override { return plan_.terrain_eps_for_zoom(z); }
     LonLatBox data_bounds() const override { return plan_.footprint(); }
+    LonLatBox data_bounds_at(int z) const override { return plan_.footprint_at(z); }
     TileRange tiles_at(int z) const override { return plan_.tiles_at(z); }
     bool may_have_tile(const ValidTile& tile) const override { return plan_.may_have_tile(tile); }
     ZoomSource zoom_source(int z) const override { return plan_.zoom_source(z); }
@@ -528,7 +531,10 @@ TileRaster DemLayer::summary_raster(const ValidTile& tile) const {
 } // namespace
 
 std::shared_ptr<const Layer> Layer::open(const LayerOptions& options) {
-    return std::make_shared<DemLayer>(options);
+    // The files themselves, so that manifests and summary keys name each of them.
+    LayerOptions expanded = options;
+    expanded.sources = expand_dem_inputs(options.sources);
+    return std::make_shared<DemLayer>(expanded);
 }
 
 void check_eps(double eps, const std::string& what) {

@@ -67,6 +67,8 @@ struct LayerOptions {
     std::string summary_dir;
     // Heights outside it are outliers, counted as nodata (--valid-range; sources/gdal_source.hpp).
     ValidRange valid_range;
+    // Which DEM wins where several overlap (--priority; sources/gdal_source.hpp).
+    SourcePriority priority = SourcePriority::Finest;
 };
 
 // How a layer makes its published error true at every valid pixel of the source.
@@ -132,7 +134,10 @@ public:
     // The eps globe terrain (quantized-mesh, 3D Tiles terrain) is meshed at: the ladder, or a
     // share of CesiumJS's own level error where that is larger.
     virtual double terrain_eps_for_zoom(int z) const = 0;
-    virtual LonLatBox data_bounds() const = 0;   // the sources' extent in lon/lat
+    virtual LonLatBox data_bounds() const = 0; // the sources' extent in lon/lat
+    // Where zoom z has data: data_bounds(), or for a collection the part of it whose sources go
+    // that deep (DemSource::footprint_at).
+    virtual LonLatBox data_bounds_at(int z) const = 0;
     virtual TileRange tiles_at(int z) const = 0; // tiles of zoom z that may hold data
     // Whether a tile of the layer's scheme lies in tiles_at of its zoom.
     virtual bool may_have_tile(const ValidTile& tile) const = 0;

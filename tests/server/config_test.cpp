@@ -254,3 +254,22 @@ TEST_CASE("valid_range: [MIN, MAX] with MIN < MAX; anything else is named") {
             tb::InputError);
     }
 }
+
+TEST_CASE("priority: \"finest\" (the default) or \"listed\"; anything else is named") {
+    TempDir dir;
+    write_file(dir / "a.asc", "");
+    const std::string path = dir / "site.json";
+    const auto parse = [&](const std::string& field) {
+        return tb::config::parse_config(
+            R"({"layers": [{"name": "a", "sources": ["a.asc"])" + field + "}]}", path);
+    };
+    CHECK(parse("").layers[0].options.priority == tb::tiler::SourcePriority::Finest);
+    CHECK(parse(R"(, "priority": "listed")").layers[0].options.priority ==
+          tb::tiler::SourcePriority::Listed);
+    CHECK_THROWS_WITH_AS(parse(R"(, "priority": "first")"),
+                         doctest::Contains("/layers/0/priority: 'first' is not a priority; use "
+                                           "'finest'"),
+                         tb::InputError);
+    CHECK_THROWS_WITH_AS(
+        parse(R"(, "priority": 1)"), doctest::Contains("/layers/0/priority"), tb::InputError);
+}

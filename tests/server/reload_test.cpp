@@ -3,6 +3,7 @@
 // of the new file makes, with new ETags and no old tile left in its store; a replacement that
 // cannot be read makes the layer answer 503 with the reason until it is fixed.
 #include "serve_process.hpp"
+#include "server/layer_reload.hpp"
 #include "server_fixture.hpp"
 #include "tiler/stores/store.hpp"
 
@@ -136,4 +137,18 @@ TEST_CASE("the periodic check finds a replaced source by itself; an unreadable r
     CHECK(fixed->status == 200);
     CHECK(fixed->body == expected);
     s.stop();
+}
+
+TEST_CASE("a directory of DEMs is checked file by file: a DEM added to it is a change") {
+    test::TempDir dir;
+    std::filesystem::create_directories(dir / "dems");
+    test::write_dem(dir / "dems/a.asc", 33);
+    const std::vector<std::string> sources{dir / "dems"};
+    const auto before = server::source_stamps(sources);
+    CHECK(before.size() == 1);
+    CHECK(server::source_stamps(sources) == before);
+    test::write_dem(dir / "dems/b.asc", 33);
+    const auto after = server::source_stamps(sources);
+    CHECK(after.size() == 2);
+    CHECK(after != before);
 }

@@ -218,3 +218,58 @@ TEST_CASE("info adds the pyramid plan, and says why a raster without a CRS has n
         CHECK(r.out.find("mercator") != std::string::npos);
     }
 }
+
+TEST_CASE("a collection given as a directory or a list file: info ranks its DEMs, build makes "
+          "one layer of them, and a bad --priority is named") {
+    ScratchDir dir;
+    // A 3" geographic DEM and a 10 m UTM block inside it, in a directory with a sidecar.
+    const std::string dems = dir.file("dems");
+    std::filesystem::create_directories(dems + "/survey");
+    Fixture coarse;
+    coarse.width = 61, coarse.height = 61;
+    coarse.type = GDT_Int16;
+    coarse.epsg = 4326;
+    coarse.geotransform = std::array<double, 6>{7.6, 1.0 / 1200, 0, 46.4, 0, -1.0 / 1200};
+    for (int k = 0; k < coarse.width * coarse.height; ++k) {
+        coarse.values.push_back(800 + (k % 61) + (k / 61));
+    }
+    tb_test::write_fixture(dems + "/srtm.tif", coarse);
+    Fixture fine;
+    fine.width = 60, fine.height = 60;
+    fine.type = GDT_Float32;
+    fine.epsg = 32632;
+    fine.geotransform = std::array<double, 6>{394300, 10, 0, 5136000, 0, -10}; // near 7.62E 46.37N
+    for (int k = 0; k < fine.width * fine.height; ++k) {
+        fine.values.push_back(850 + 0.1 * (k % 60));
+    }
+    tb_test::write_fixture(dems + "/survey/block.tif", fine);
+    std::ofstream(dems + "/srtm.tif.aux.xml") << "<PAMDataset/>";
+
+    Run r = run(dir, "info " + dems);
+    REQUIRE_MESSAGE(r.code == 0, r.err);
+    CHECK(r.out.find("collection of 2 DEM groups, ranked finest") != std::string::npos);
+    const auto first = r.out.find("  1. " + dems + "/survey/block.tif: 10 m pixels, EPSG:32632");
+    const auto second = r.out.find("  2. " + dems + "/srtm.tif");
+    CHECK(first != std::string::npos);
+    CHECK(second != std::string::npos);
+    CHECK(first < second);
+
+    // A list file in the listed order: the coarse DEM first, and it wins.
+    std::ofstream(dir.file("dems.txt")) << "# the order is the priority\ndems/srtm.tif\n"
+                                        << "dems/survey\n";
+    r = run(dir, "info --priority listed " + dir.file("dems.txt"));
+    REQUIRE_MESSAGE(r.code == 0, r.err);
+    CHECK(r.out.find("ranked listed") != std::string::npos);
+    CHECK(r.out.find("  1. " + dems + "/srtm.tif") != std::string::npos);
+
+    r = run(dir, "build " + dems + " -o " + dir.file("out") + " --formats glb");
+    REQUIRE_MESSAGE(r.code == 0, r.err);
+    CHECK(std::filesystem::exists(dir.file("out/dems/tileset.json")));
+
+    r = run(dir, "build " + dems + " -o " + dir.file("out2") + " --priority first");
+    CHECK(r.code == 2);
+    CHECK(r.err.find("build: --priority: 'first' is not a priority") != std::string::npos);
+    r = run(dir, "info " + dir.file("nothing") + "/*.tif");
+    CHECK(r.code == 2);
+    CHECK(r.err.find("matches no file") != std::string::npos);
+}

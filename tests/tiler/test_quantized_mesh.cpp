@@ -236,7 +236,7 @@ TEST_CASE("terrain extension lists parse by their layer.json names, and layer.js
     CHECK(tiler::terrain_extensions_json(kWaterMask | kMetadata) == R"(["watermask","metadata"])");
 
     tiler::TerrainSpec spec{
-        "dem", 2, 4, LonLatBox{7, 46, 7.5, 46.5}, [](int z) { return 1.0 * z; }};
+        "dem", 2, 4, LonLatBox{7, 46, 7.5, 46.5}, [](int z) { return 1.0 * z; }, {}};
     const std::string full = tiler::terrain_layer_json(spec);
     CHECK(full.find(R"("extensions":["octvertexnormals","watermask","metadata"],)"
                     R"("metadataAvailability":10,)") != std::string::npos);

@@ -122,16 +122,14 @@ Summary judge_zoom(const Layer& layer,
     return s;
 }
 
-// Judges the finest and the coarsest zoom of a layer on `path` (every zoom with `every_zoom`).
-void judge_layer(const std::string& path,
-                 Guarantee expected,
-                 LayerOptions options = {},
-                 bool every_zoom = false) {
-    options.sources = {path};
+// Judges the finest and the coarsest zoom of a layer (every zoom with `every_zoom`) against
+// `pixels`, the truth every tile must hold.
+void judge_pixels(const LayerOptions& options,
+                  const std::vector<tb_oracle::Pixel>& pixels,
+                  Guarantee expected,
+                  bool every_zoom) {
     const auto layer = Layer::open(options);
     CHECK(layer->guarantee() == expected);
-    static const tb_oracle::Geoid geoid;
-    const std::vector<tb_oracle::Pixel> pixels = tb_oracle::read_pixels(path, geoid);
     std::map<std::string, Published> published;
     collect(*layer, "tileset.json", published);
     std::vector<int> zooms{layer->max_zoom(), layer->min_zoom()};
@@ -144,16 +142,27 @@ void judge_layer(const std::string& path,
     for (int z : zooms) {
         CAPTURE(z);
         const Summary s = judge_zoom(*layer, pixels, published, z);
-        MESSAGE(path << " zoom " << z << " (" << std::string(to_string(layer->zoom_source(z)))
-                     << "): " << s.tiles << " tiles, " << s.pixels
-                     << " source pixels judged, worst " << s.worst << " m, worst / published "
-                     << s.worst_ratio << ", " << s.undrawn << " pixels undrawn");
+        MESSAGE(options.sources.front()
+                << " zoom " << z << " (" << std::string(to_string(layer->zoom_source(z)))
+                << "): " << s.tiles << " tiles, " << s.pixels << " source pixels judged, worst "
+                << s.worst << " m, worst / published " << s.worst_ratio << ", " << s.undrawn
+                << " pixels undrawn");
         CHECK(s.pixels > 0);
         CHECK(s.worst_ratio <= 1.0);
         if (layer->zoom_source(z) == ZoomSource::Pixels) {
             CHECK(s.undrawn == 0); // every valid pixel lies under the drawn surface
         }
     }
+}
+
+// Judges the finest and the coarsest zoom of a layer on `path` (every zoom with `every_zoom`).
+void judge_layer(const std::string& path,
+                 Guarantee expected,
+                 LayerOptions options = {},
+                 bool every_zoom = false) {
+    options.sources = {path};
+    static const tb_oracle::Geoid geoid;
+    judge_pixels(options, tb_oracle::read_pixels(path, geoid), expected, every_zoom);
 }
 
 } // namespace
@@ -265,4 +274,163 @@ TEST_CASE("a 4.3 Mpixel DEM: coarse tiles read from its summary keep every sourc
     CHECK(layer->zoom_source(layer->max_zoom()) == ZoomSource::Pixels);
     CHECK(layer->zoom_source(layer->min_zoom()) == ZoomSource::Summary);
     judge_layer(path, Guarantee::SourcePixels, {}, true);
+}
+
+namespace {
+
+// The truth of a collection ranked `first` over `second`: every valid pixel of `first`, and
+// each valid pixel of `second` whose centre lies in no valid pixel of `first` (read with GDAL,
+// located with OGR).
+std::vector<tb_oracle::Pixel>
+ranked_pixels(const std::string& first, const std::string& second, const tb_oracle::Geoid& geoid) {
+    std::vector<tb_oracle::Pixel> out = tb_oracle::read_pixels(first, geoid);
+    GDALDatasetUniquePtr ds(GDALDataset::Open(first.c_str(), GDAL_OF_RASTER));
+    REQUIRE(ds != nullptr);
+    const int w = ds->GetRasterXSize(), h = ds->GetRasterYSize();
+    double gt[6], inv[6];
+    REQUIRE(ds->GetGeoTransform(gt) == CE_None);
+    REQUIRE(GDALInvGeoTransform(gt, inv));
+    GDALRasterBand* band = ds->GetRasterBand(1);
+    int has_nodata = 0;
+    const double nodata = band->GetNoDataValue(&has_nodata);
+    std::vector<double> raw(static_cast<std::size_t>(w) * h);
+    REQUIRE(band->RasterIO(GF_Read, 0, 0, w, h, raw.data(), w, h, GDT_Float64, 0, 0, nullptr) ==
+            CE_None);
+    OGRSpatialReference wgs84, src = *ds->GetSpatialRef();
+    wgs84.importFromEPSG(4326);
+    wgs84.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    src.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    std::unique_ptr<OGRCoordinateTransformation> ct(
+        OGRCreateCoordinateTransformation(&wgs84, &src));
+    REQUIRE(ct != nullptr);
+    for (const tb_oracle::Pixel& p : tb_oracle::read_pixels(second, geoid)) {
+        double x = p.lon, y = p.lat;
+        REQUIRE(ct->Transform(1, &x, &y));
+        const double u = std::floor(inv[0] + x * inv[1] + y * inv[2]);
+        const double v = std::floor(inv[3] + x * inv[4] + y * inv[5]);
+        const bool inside = u >= 0 && v >= 0 && u < w && v < h;
+        const double value =
+            inside ? raw[static_cast<std::size_t>(v) * w + static_cast<std::size_t>(u)] : NAN;
+        if (std::isnan(value) || (has_nodata && value == nodata)) {
+            out.push_back(p);
+        }
+    }
+    return out;
+}
+
+double coarse_height(double lon, double lat) {
+    return 1500 + 300 * std::sin(lon * 60) * std::cos(lat * 45);
+}
+
+// A 10 m UTM survey over the middle of a 3" geographic DEM, 2 to 10 m above it (ripples the
+// coarse DEM misses), and a round void in its middle that the coarse DEM fills.
+void write_collection(const tb_test::ScratchDir& dir, std::string& coarse, std::string& fine) {
+    tb_test::Fixture c;
+    c.width = 121, c.height = 121;
+    c.type = GDT_Int16;
+    c.epsg = 4326;
+    c.geotransform = std::array<double, 6>{7.6, 1.0 / 1200, 0, 46.4, 0, -1.0 / 1200};
+    for (int j = 0; j < c.height; ++j) {
+        for (int i = 0; i < c.width; ++i) {
+            c.values.push_back(coarse_height(7.6 + (i + 0.5) / 1200, 46.4 - (j + 0.5) / 1200));
+        }
+    }
+    coarse = tb_test::write_fixture(dir.file("srtm.tif"), c);
+
+    OGRSpatialReference wgs84, utm;
+    wgs84.importFromEPSG(4326);
+    utm.importFromEPSG(32632);
+    wgs84.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    utm.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    std::unique_ptr<OGRCoordinateTransformation> to_utm(
+        OGRCreateCoordinateTransformation(&wgs84, &utm));
+    std::unique_ptr<OGRCoordinateTransformation> to_lonlat(
+        OGRCreateCoordinateTransformation(&utm, &wgs84));
+    double x = 7.65, y = 46.35;
+    REQUIRE(to_utm->Transform(1, &x, &y));
+    tb_test::Fixture f;
+    f.width = 300, f.height = 300;
+    f.type = GDT_Float32;
+    f.epsg = 32632;
+    f.nodata = -9999;
+    f.geotransform = std::array<double, 6>{x - 1500, 10, 0, y + 1500, 0, -10};
+    for (int j = 0; j < f.height; ++j) {
+        for (int i = 0; i < f.width; ++i) {
+            double lon = x - 1500 + (i + 0.5) * 10, lat = y + 1500 - (j + 0.5) * 10;
+            REQUIRE(to_lonlat->Transform(1, &lon, &lat));
+            const bool hole = std::hypot(i - 150, j - 150) < 40;
+            f.values.push_back(hole ? -9999
+                                    : coarse_height(lon, lat) + 6 +
+                                          4 * std::sin(i / 7.0) * std::cos(j / 5.0));
+        }
+    }
+    fine = tb_test::write_fixture(dir.file("lidar_utm.tif"), f);
+}
+
+// The collection's own lattice sample at (lon, lat), geodetic zoom z.
+double sample_at(const DemSource& source, int z, double lon, double lat) {
+    const double step = 180.0 / std::exp2(z) / 256;
+    const auto column = static_cast<std::int64_t>(std::llround((lon + 180) / step));
+    const auto row = static_cast<std::int64_t>(std::llround((90 - lat) / step));
+    const LatticeBlock b = source.sample(Scheme::Geodetic, z, 256, column, row, 1, 1);
+    REQUIRE(b.valid[0]);
+    return b.heights[0];
+}
+
+} // namespace
+
+TEST_CASE("a collection of a UTM survey over geographic SRTM: each keeps its resolution and "
+          "CRS, the finer wins, the coarser fills its voids, and every tile holds the winning "
+          "pixels within its published error") {
+    tb_test::ScratchDir dir;
+    std::string coarse, fine;
+    write_collection(dir, coarse, fine);
+
+    const auto alone = DemSource::open({coarse});
+    const auto both = DemSource::open({coarse, fine});
+    REQUIRE(both->parts().size() == 2);
+    CHECK(both->parts()[0]->path == fine); // finest first, whatever the order given
+    CHECK(both->parts()[1]->path == coarse);
+    CHECK(both->pixels_per_sample(Scheme::Geodetic, 12, 256) >
+          3 * alone->pixels_per_sample(Scheme::Geodetic, 12, 256));
+    // In the survey: its heights, at least 2 m above the coarse DEM; in its void and outside it:
+    // the coarse DEM's (bilinear between 3" samples rounded to 1 m: within 1 m).
+    CHECK(sample_at(*both, 13, 7.66, 46.35) - coarse_height(7.66, 46.35) > 1.5);
+    CHECK(std::abs(sample_at(*both, 13, 7.65, 46.35) - coarse_height(7.65, 46.35)) < 1);
+    CHECK(std::abs(sample_at(*both, 13, 7.61, 46.39) - coarse_height(7.61, 46.39)) < 1);
+    // --priority listed: the first given wins everywhere it has data.
+    const auto listed = DemSource::open({coarse, fine}, std::nullopt, {}, SourcePriority::Listed);
+    CHECK(listed->parts()[0]->path == coarse);
+    CHECK(std::abs(sample_at(*listed, 13, 7.66, 46.35) - coarse_height(7.66, 46.35)) < 1);
+
+    LayerOptions options;
+    options.sources = {coarse, fine};
+    // Depth follows the data: below the coarse DEM's own deepest zoom only the survey's tiles,
+    // in the tilesets and in layer.json alike.
+    const auto layer = Layer::open(options);
+    LayerOptions coarse_only;
+    coarse_only.sources = {coarse};
+    const int coarse_deepest = Layer::open(coarse_only)->max_zoom();
+    REQUIRE(layer->max_zoom() >= coarse_deepest + 2);
+    const auto same = [](const TileRange& a, const TileRange& b) {
+        return a.z == b.z && a.x0 == b.x0 && a.x1 == b.x1 && a.y0 == b.y0 && a.y1 == b.y1;
+    };
+    for (int z = layer->min_zoom(); z <= layer->max_zoom(); ++z) {
+        CAPTURE(z);
+        const DemSource& deep = z > coarse_deepest ? *DemSource::open({fine}) : *alone;
+        const TileRange expected = tiles_covering(Scheme::Geodetic, deep.footprint(), z);
+        CHECK(same(layer->tiles_at(z), expected));
+    }
+    std::string layer_json;
+    REQUIRE(layer->document("layer.json", layer_json));
+    const auto available = nlohmann::json::parse(layer_json)["available"];
+    const TileRange deepest = layer->tiles_at(layer->max_zoom());
+    CHECK(available[static_cast<std::size_t>(layer->max_zoom())] ==
+          nlohmann::json::parse(R"([{"startX":)" + std::to_string(deepest.x0) + R"(,"startY":)" +
+                                std::to_string(deepest.y0) + R"(,"endX":)" +
+                                std::to_string(deepest.x1) + R"(,"endY":)" +
+                                std::to_string(deepest.y1) + "}]"));
+
+    static const tb_oracle::Geoid geoid;
+    judge_pixels(options, ranked_pixels(fine, coarse, geoid), Guarantee::Measured, false);
 }

@@ -156,6 +156,8 @@ struct TerrainSpec {
     int min_zoom = 0, max_zoom = 0; // the zooms meshed from the DEM; coarser ones are filler
     LonLatBox data_bounds;
     std::function<double(int)> eps_for_zoom;
+    // Where zoom z has data, when that differs by zoom (a collection); data_bounds otherwise.
+    std::function<LonLatBox(int)> bounds_at;
 };
 
 // Levels of child availability each tile's metadata extension lists (layer.json's

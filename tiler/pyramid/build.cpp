@@ -215,7 +215,8 @@ TerrainSpec terrain_spec_of(const Layer& layer) {
                        layer.min_zoom(),
                        layer.max_zoom(),
                        layer.data_bounds(),
-                       [&layer](int z) { return layer.eps_for_zoom(z); }};
+                       [&layer](int z) { return layer.eps_for_zoom(z); },
+                       [&layer](int z) { return layer.data_bounds_at(z); }};
 }
 
 // Whether tile id is made in format f: DEM and terrain tiles wherever planned, mesh tiles where

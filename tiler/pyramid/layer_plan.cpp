@@ -118,11 +118,15 @@ ZoomSource LayerPlan::zoom_source(int z) const {
     return ZoomSource::Lattice;
 }
 
+LonLatBox LayerPlan::footprint_at(int z) const {
+    return source_.footprint_at(options_.scheme, z, options_.tile_size);
+}
+
 TileRange LayerPlan::tiles_at(int z) const {
     if (z < min_zoom_ || z > max_zoom_) {
         return TileRange{z, 0, 0, -1, -1};
     }
-    return tiles_covering(options_.scheme, footprint_, z);
+    return tiles_covering(options_.scheme, footprint_at(z), z);
 }
 
 bool LayerPlan::may_have_tile(const ValidTile& tile) const {
@@ -145,7 +149,7 @@ bool LayerPlan::terrain_has_data(const ValidTile& tile) const {
     if (tile.z() < terrain_min_zoom_ || tile.z() > max_zoom_) {
         return false;
     }
-    const TileRange r = tiles_covering(options_.scheme, footprint_, tile.z());
+    const TileRange r = tiles_covering(options_.scheme, footprint_at(tile.z()), tile.z());
     return !r.empty() && tile.x() >= r.x0 && tile.x() <= r.x1 && tile.y() >= r.y0 &&
            tile.y() <= r.y1;
 }
@@ -277,9 +281,7 @@ double LayerPlan::tile_pixels(int z) const {
         return std::min<double>(width / pixels_->dx + 1, info.width) *
                std::min<double>(width / pixels_->dy + 1, info.height);
     }
-    const double side =
-        source_.pixels_per_sample(options_.scheme, z, options_.tile_size) * options_.tile_size + 2;
-    return std::min<double>(side, info.width) * std::min<double>(side, info.height);
+    return source_.tile_pixels(options_.scheme, z, options_.tile_size);
 }
 
 // Ellipsoidal range of every sample a tile can hold: the data's range, sea level where

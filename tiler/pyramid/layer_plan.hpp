@@ -29,6 +29,9 @@ public:
     // The first zoom globe terrain is meshed from the data at (filler on the geoid above it).
     int terrain_min_zoom() const { return terrain_min_zoom_; }
     LonLatBox footprint() const { return footprint_; }
+    // Where zoom z has data (DemSource::footprint_at): the footprint, or for a collection the
+    // part whose sources go that deep.
+    LonLatBox footprint_at(int z) const;
     // The source's pixel grid in the scheme's CRS, if it has one (Layer::guarantee).
     const std::optional<PixelGrid>& pixels() const { return pixels_; }
     VerticalDatum datum() const { return datum_; }

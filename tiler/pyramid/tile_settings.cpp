@@ -56,6 +56,9 @@ Manifest tile_settings(const Layer& layer) {
                        "[" + json_number(o.valid_range.low) + ", " +
                            json_number(o.valid_range.high) + "]");
     }
+    if (o.priority != SourcePriority::Finest) { // absent by default, as valid_range
+        m.emplace_back("priority", json_string(to_string(o.priority)));
+    }
     std::string eps = "[";
     for (int z = layer.min_zoom(); z <= layer.max_zoom(); ++z) {
         eps += (z > layer.min_zoom() ? ", " : "") + json_number(layer.eps_for_zoom(z));

@@ -3,7 +3,9 @@
 #include "core/error.hpp"
 #include "tiler/layer.hpp"
 #include "tiler/log.hpp"
+#include "tiler/sources/collection_source.hpp"
 #include "tiler/sources/gdal_source.hpp"
+#include "tiler/sources/source_list.hpp"
 
 #include <cpl_conv.h>
 #include <cpl_error.h>
@@ -180,6 +182,11 @@ public:
         const std::optional<Window> w = window_of(box);
         return w ? static_cast<std::size_t>(w->width) * static_cast<std::size_t>(w->height) : 0;
     }
+    std::unique_ptr<const PixelCoverage> coverage(const LonLatBox& box) const override;
+    double tile_pixels(Scheme scheme, int z, int size) const override {
+        const double side = pixels_per_sample(scheme, z, size) * size + 2;
+        return std::min<double>(side, info_.width) * std::min<double>(side, info_.height);
+    }
 
 private:
     // A window of source pixels: columns [column0, column0 + width), rows likewise.
@@ -196,6 +203,7 @@ private:
     struct Overview {
         int index = 0, width = 0, height = 0;
     };
+    class Coverage;
 
     struct Handle {
         GDALDatasetUniquePtr ds;
@@ -676,6 +684,58 @@ void GdalDemSource::pixels_in(const LonLatBox& box, const PixelVisitor& visit) c
     }
 }
 
+// The validity of coverage()'s window, and a borrowed handle for its lon/lat -> source CRS
+// transformation.
+class GdalDemSource::Coverage final : public PixelCoverage {
+public:
+    Coverage(const GdalDemSource& owner, Window w, std::vector<std::uint8_t> valid)
+        : owner_(owner), lease_(owner.acquire()), w_(w), valid_(std::move(valid)) {}
+
+    void mark(const std::vector<double>& lons,
+              const std::vector<double>& lats,
+              std::vector<std::uint8_t>& covered) const override {
+        TB_ASSERT(lons.size() == lats.size() && covered.size() == lons.size());
+        std::vector<double> xs = lons, ys = lats;
+        std::vector<int> ok(xs.size(), 1);
+        if (OGRCoordinateTransformation* ct = owner_.transform_for(*lease_, Scheme::Geodetic)) {
+            ct->Transform(static_cast<int>(xs.size()), xs.data(), ys.data(), nullptr, ok.data());
+        }
+        const auto& t = owner_.inverse_;
+        for (std::size_t k = 0; k < xs.size(); ++k) {
+            if (covered[k] || !ok[k]) {
+                continue;
+            }
+            // Pixel (i, j) covers [i, i + 1) x [j, j + 1) in pixel coordinates.
+            const double u = std::floor(t[0] + xs[k] * t[1] + ys[k] * t[2]) - w_.column0;
+            const double v = std::floor(t[3] + xs[k] * t[4] + ys[k] * t[5]) - w_.row0;
+            if (u >= 0 && v >= 0 && u < w_.width && v < w_.height &&
+                valid_[static_cast<std::size_t>(v) * w_.width + static_cast<std::size_t>(u)]) {
+                covered[k] = 1;
+            }
+        }
+    }
+
+private:
+    const GdalDemSource& owner_;
+    Lease lease_;
+    Window w_;
+    std::vector<std::uint8_t> valid_; // row-major over w_
+};
+
+std::unique_ptr<const PixelCoverage> GdalDemSource::coverage(const LonLatBox& box) const {
+    TB_ASSERT(georeferenced_);
+    const std::optional<Window> w = window_of(box);
+    if (!w) {
+        return std::make_unique<Coverage>(*this, Window{}, std::vector<std::uint8_t>());
+    }
+    const std::vector<double> heights = read_pixels(w->column0, w->row0, w->width, w->height);
+    std::vector<std::uint8_t> valid(heights.size());
+    for (std::size_t k = 0; k < heights.size(); ++k) {
+        valid[k] = std::isnan(heights[k]) ? 0 : 1;
+    }
+    return std::make_unique<Coverage>(*this, *w, std::move(valid));
+}
+
 void GdalDemSource::to_lonlat(std::vector<double>& x,
                               std::vector<double>& y,
                               std::vector<int>& good) const {
@@ -837,9 +897,94 @@ double sample_height(
     return raw * scale + offset;
 }
 
+namespace {
+
+// One in-memory VRT mosaic of files that share a CRS and a pixel size; the first given wins
+// where they overlap (a VRT draws its last source on top, so they are handed over reversed).
+std::shared_ptr<const DemSource> open_mosaic(const std::vector<std::string>& paths,
+                                             std::optional<double> nodata,
+                                             const ValidRange& range) {
+    const std::string names = inputs_text(paths);
+    CslPtr argv(CSLAddString(nullptr, "-b"));
+    argv.reset(CSLAddString(argv.release(), "1"));
+    if (nodata) {
+        char value[32];
+        std::snprintf(value, sizeof value, "%.17g", *nodata);
+        for (const char* option : {"-srcnodata", "-vrtnodata"}) {
+            argv.reset(CSLAddString(argv.release(), option));
+            argv.reset(CSLAddString(argv.release(), value));
+        }
+    }
+    std::unique_ptr<GDALBuildVRTOptions, BuildVrtOptionsDeleter> options(
+        GDALBuildVRTOptionsNew(argv.get(), nullptr));
+    std::vector<const char*> sources;
+    for (auto p = paths.rbegin(); p != paths.rend(); ++p) {
+        sources.push_back(p->c_str());
+    }
+    int usage_error = 0;
+    CPLErrorReset();
+    GDALDatasetUniquePtr vrt(GDALDataset::FromHandle(GDALBuildVRT("",
+                                                                  static_cast<int>(sources.size()),
+                                                                  nullptr,
+                                                                  sources.data(),
+                                                                  options.get(),
+                                                                  &usage_error)));
+    if (!vrt || usage_error) {
+        throw InputError(names + ": cannot be mosaicked (" + gdal_message() + ")");
+    }
+    char** xml = vrt->GetMetadata("xml:VRT");
+    if (!xml || !xml[0]) {
+        throw IoError(names + ": GDAL gave no VRT description of the mosaic");
+    }
+    const std::string open_name = xml[0];
+    DemInfo info = inspect_dem(open_name, kExactRangeSamples, nodata, range);
+    info.path = names;
+    check_likely_nodata(info);
+    return std::make_shared<GdalDemSource>(open_name, std::move(info));
+}
+
+// The files in groups that one VRT can hold: one CRS, one pixel size, no rotation. Groups keep
+// the order of their first file, and files keep theirs within a group.
+std::vector<std::vector<std::size_t>> group_by_grid(const std::vector<std::string>& paths,
+                                                    const std::vector<DemInfo>& infos) {
+    std::vector<OGRSpatialReference> srs(paths.size());
+    for (std::size_t k = 0; k < paths.size(); ++k) {
+        GDALDatasetUniquePtr ds(GDALDataset::Open(paths[k].c_str(), GDAL_OF_RASTER));
+        if (!ds || !ds->GetSpatialRef()) {
+            throw InputError(paths[k] + ": has no CRS; a collection of DEMs needs one in each");
+        }
+        srs[k] = *ds->GetSpatialRef();
+    }
+    const auto same_grid = [&](std::size_t a, std::size_t b) {
+        const auto& g = infos[a].geotransform;
+        const auto& h = infos[b].geotransform;
+        const auto close = [](double x, double y) {
+            return std::abs(x - y) <= 1e-9 * std::max(std::abs(x), std::abs(y));
+        };
+        const char* options[] = {"IGNORE_DATA_AXIS_TO_SRS_AXIS_MAPPING=YES", nullptr};
+        return g[2] == 0 && g[4] == 0 && h[2] == 0 && h[4] == 0 && close(g[1], h[1]) &&
+               close(g[5], h[5]) && srs[a].IsSame(&srs[b], options);
+    };
+    std::vector<std::vector<std::size_t>> groups;
+    for (std::size_t k = 0; k < paths.size(); ++k) {
+        auto g = std::find_if(groups.begin(), groups.end(), [&](const auto& group) {
+            return same_grid(group.front(), k);
+        });
+        if (g == groups.end()) {
+            groups.push_back({k});
+        } else {
+            g->push_back(k);
+        }
+    }
+    return groups;
+}
+
+} // namespace
+
 std::shared_ptr<const DemSource> DemSource::open(const std::vector<std::string>& paths,
                                                  std::optional<double> nodata,
-                                                 const ValidRange& range) {
+                                                 const ValidRange& range,
+                                                 SourcePriority priority) {
     init_gdal();
     if (paths.empty()) {
         throw InputError("no DEM given; name at least one raster file");
@@ -863,64 +1008,33 @@ std::shared_ptr<const DemSource> DemSource::open(const std::vector<std::string>&
     if (paths.size() == 1) {
         return std::make_shared<GdalDemSource>(paths[0], infos[0]);
     }
-
-    // Several files: one in-memory VRT mosaic. All must share one CRS and be georeferenced.
-    std::string names;
     for (std::size_t k = 0; k < paths.size(); ++k) {
-        names += (k ? ", " : "") + paths[k];
         if (!infos[k].has_geotransform || infos[k].crs_name.empty()) {
             throw InputError(paths[k] + ": has no georeferencing; a mosaic of several DEMs needs "
                                         "a CRS and geotransform in each");
         }
     }
-    {
-        GDALDatasetUniquePtr first(GDALDataset::Open(paths[0].c_str(), GDAL_OF_RASTER));
-        for (std::size_t k = 1; k < paths.size(); ++k) {
-            GDALDatasetUniquePtr other(GDALDataset::Open(paths[k].c_str(), GDAL_OF_RASTER));
-            const char* options[] = {"IGNORE_DATA_AXIS_TO_SRS_AXIS_MAPPING=YES", nullptr};
-            if (!first->GetSpatialRef() || !other->GetSpatialRef() ||
-                !first->GetSpatialRef()->IsSame(other->GetSpatialRef(), options)) {
-                throw InputError(paths[k] + ": its CRS differs from " + paths[0] +
-                                 "'s; reproject the DEMs to one CRS before mosaicking");
-            }
+    std::vector<std::shared_ptr<const DemSource>> members;
+    for (const auto& group : group_by_grid(paths, infos)) {
+        if (group.size() == 1) {
+            members.push_back(std::make_shared<GdalDemSource>(paths[group[0]], infos[group[0]]));
+            continue;
         }
-    }
-    CslPtr argv(CSLAddString(nullptr, "-b"));
-    argv.reset(CSLAddString(argv.release(), "1"));
-    if (nodata) {
-        char value[32];
-        std::snprintf(value, sizeof value, "%.17g", *nodata);
-        for (const char* option : {"-srcnodata", "-vrtnodata"}) {
-            argv.reset(CSLAddString(argv.release(), option));
-            argv.reset(CSLAddString(argv.release(), value));
+        std::vector<std::string> files;
+        for (std::size_t k : group) {
+            files.push_back(paths[k]);
         }
+        members.push_back(open_mosaic(files, nodata, range));
     }
-    std::unique_ptr<GDALBuildVRTOptions, BuildVrtOptionsDeleter> options(
-        GDALBuildVRTOptionsNew(argv.get(), nullptr));
-    std::vector<const char*> sources;
-    for (const auto& p : paths) {
-        sources.push_back(p.c_str());
+    if (members.size() == 1) {
+        return members.front();
     }
-    int usage_error = 0;
-    CPLErrorReset();
-    GDALDatasetUniquePtr vrt(GDALDataset::FromHandle(GDALBuildVRT("",
-                                                                  static_cast<int>(sources.size()),
-                                                                  nullptr,
-                                                                  sources.data(),
-                                                                  options.get(),
-                                                                  &usage_error)));
-    if (!vrt || usage_error) {
-        throw InputError(names + ": cannot be mosaicked (" + gdal_message() + ")");
+    if (priority == SourcePriority::Finest) {
+        std::stable_sort(members.begin(), members.end(), [](const auto& a, const auto& b) {
+            return a->info().resolution_m < b->info().resolution_m;
+        });
     }
-    char** xml = vrt->GetMetadata("xml:VRT");
-    if (!xml || !xml[0]) {
-        throw IoError(names + ": GDAL gave no VRT description of the mosaic");
-    }
-    const std::string open_name = xml[0];
-    DemInfo info = inspect_dem(open_name, kExactRangeSamples, nodata, range);
-    info.path = names;
-    check_likely_nodata(info);
-    return std::make_shared<GdalDemSource>(open_name, std::move(info));
+    return make_collection_source(std::move(members));
 }
 
 void write_tile_raster_tiff(const TileRaster& raster, const std::string& path) {

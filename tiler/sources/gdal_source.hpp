@@ -152,18 +152,42 @@ struct SourcePixel {
     double height = 0;
 };
 
+// Which of a set of lon/lat points lie in a valid pixel of a source: in the area of a pixel
+// that is not nodata. Made for one box (DemSource::coverage), used by one thread.
+class PixelCoverage {
+public:
+    virtual ~PixelCoverage() = default;
+    // Sets covered[k] = 1 where point (lons[k], lats[k]) lies in a valid pixel; leaves the rest.
+    virtual void mark(const std::vector<double>& lons,
+                      const std::vector<double>& lats,
+                      std::vector<std::uint8_t>& covered) const = 0;
+};
+
+// How the DEMs of a collection rank where they overlap (--priority).
+enum class SourcePriority {
+    Finest, // the finer resolution wins; equal resolutions keep the order given
+    Listed, // the order given (command line, list file or config): the first wins
+};
+// "finest" | "listed"; InputError naming `what` otherwise.
+SourcePriority parse_source_priority(const std::string& text, const std::string& what);
+const char* to_string(SourcePriority priority);
+
 // Band 1 of one DEM or of an in-memory VRT mosaic of several, opened for reading from many
 // threads: each call borrows a GDAL handle from a small pool (GDAL handles are not
 // thread-safe), so a DemSource is safe to share.
 class DemSource {
 public:
     // `nodata`, when given, replaces every file's nodata value (--nodata). Throws InputError
-    // naming the file and problem: no band, complex or RGB(A) data, sources of different CRSs,
+    // naming the file and problem: no band, complex or RGB(A) data,
     // likely voids not declared as nodata (DemInfo::likely_nodata) while `nodata` is not given;
     // IoError when a file cannot be read.
+    // Files of one CRS and one pixel size read as one VRT mosaic (the first given wins where
+    // they overlap); several such groups as a collection (collection_source.hpp), ranked by
+    // `priority`.
     static std::shared_ptr<const DemSource> open(const std::vector<std::string>& paths,
                                                  std::optional<double> nodata = std::nullopt,
-                                                 const ValidRange& range = {});
+                                                 const ValidRange& range = {},
+                                                 SourcePriority priority = SourcePriority::Finest);
     virtual ~DemSource() = default;
 
     // Description of the (mosaic) raster, as inspect_dem gives it.
@@ -225,6 +249,18 @@ public:
     // At most how many pixels pixels_in(box) visits: the size of the window it reads. Throws
     // as pixels_in does.
     virtual std::size_t window_pixels(const LonLatBox& box) const = 0;
+    // Which points of `box` lie in a valid pixel of the source (the full-resolution pixels of
+    // pixels_in's window). Throws as pixels_in does. Thread-safe.
+    virtual std::unique_ptr<const PixelCoverage> coverage(const LonLatBox& box) const = 0;
+    // About how many full-resolution pixels a tile of zoom z reads at most (pixels_in's window):
+    // its side in pixels, clipped to the raster. Requires georeferenced().
+    virtual double tile_pixels(Scheme scheme, int z, int size) const = 0;
+    // Where data as fine as zoom z's lattice or finer lies: the footprint, or for a collection
+    // the footprints of the members that go that deep (the pyramid goes as deep as the finest
+    // source under each region, and no deeper elsewhere). Requires georeferenced().
+    virtual LonLatBox footprint_at(Scheme, int /*z*/, int /*size*/) const { return footprint(); }
+    // The DEMs it reads: itself, or each member of a collection (collection_source.hpp).
+    virtual std::vector<const DemInfo*> parts() const { return {&info()}; }
 
     // The whole band 1 at full resolution, row 0 = first raster row, nodata marked invalid and
     // filled (fill_voids, margin 0). Needs no georeferencing. Throws InputError when every

@@ -216,4 +216,15 @@ std::vector<std::string> expand_dem_inputs(const std::vector<std::string>& input
     return found.paths;
 }
 
+std::string inputs_text(const std::vector<std::string>& inputs) {
+    std::string text;
+    for (std::size_t i = 0; i < inputs.size() && i < 3; ++i) {
+        text += (i ? ", " : "") + inputs[i];
+    }
+    if (inputs.size() > 3) {
+        text += " and " + std::to_string(inputs.size() - 3) + " more";
+    }
+    return text;
+}
+
 } // namespace tb::tiler

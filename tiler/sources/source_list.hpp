@@ -25,4 +25,7 @@ namespace tb::tiler {
 // An empty `inputs` gives an empty result (the caller reports that no DEM was given).
 std::vector<std::string> expand_dem_inputs(const std::vector<std::string>& inputs);
 
+// Several DEMs named in one line of a message or log: the first three, and how many more.
+std::string inputs_text(const std::vector<std::string>& inputs);
+
 } // namespace tb::tiler
