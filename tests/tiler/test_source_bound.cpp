@@ -13,6 +13,7 @@
 #include <cmath>
 #include <map>
 #include <random>
+#include <set>
 #include <string>
 
 using namespace tb::tiler;
@@ -430,6 +431,29 @@ TEST_CASE("a collection of a UTM survey over geographic SRTM: each keeps its res
                                 std::to_string(deepest.y0) + R"(,"endX":)" +
                                 std::to_string(deepest.x1) + R"(,"endY":)" +
                                 std::to_string(deepest.y1) + "}]"));
+
+    // Across the survey's edge, as across any tile border, neighbours draw the same vertices
+    // on the line they share: no crack.
+    const int zmax = layer->max_zoom();
+    const std::int64_t row = (deepest.y0 + deepest.y1) / 2;
+    for (std::int64_t x = deepest.x0; x < deepest.x1; ++x) {
+        CAPTURE(x);
+        const double edge = tile_bounds(Scheme::Geodetic, {zmax, x + 1, row}).west;
+        const auto on_edge = [&](std::int64_t column) {
+            const tb_oracle::Drawn d = tb_oracle::decode_glb(
+                layer->make_tile(layer->tile({zmax, column, row}), Format::Glb));
+            std::set<std::array<double, 3>> out;
+            for (const auto& p : d.ecef) {
+                if (std::abs(tb_oracle::geodetic(p)[0] - edge) < 1e-6) {
+                    out.insert(p);
+                }
+            }
+            return out;
+        };
+        const auto west = on_edge(x);
+        CHECK(west.size() >= 2);
+        CHECK(west == on_edge(x + 1));
+    }
 
     static const tb_oracle::Geoid geoid;
     judge_pixels(options, ranked_pixels(fine, coarse, geoid), Guarantee::Measured, false);
