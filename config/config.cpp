@@ -342,6 +342,19 @@ void parse_summary_dir(Checker& check,
     }
 }
 
+// "priority": "finest" | "listed", which of a collection's DEMs wins where they overlap.
+void parse_priority(Checker& check,
+                    const json& value,
+                    const std::string& at,
+                    tiler::LayerOptions& o) {
+    if (!value.contains("priority")) {
+        return;
+    }
+    if (auto s = check.one_of(value["priority"], at + "/priority", {"finest", "listed"})) {
+        o.priority = tiler::parse_source_priority(*s, at + "/priority");
+    }
+}
+
 // "valid_range": [MIN, MAX] metres, MIN < MAX; heights outside count as nodata.
 void parse_valid_range(Checker& check,
                        const json& value,
@@ -539,15 +552,7 @@ void parse_layer(Checker& check,
     }
     parse_summary_dir(check, value, at, base_dir, o);
     parse_valid_range(check, value, at, o);
-    if (value.contains("priority")) {
-        if (auto s = check.string(value["priority"], at + "/priority")) {
-            try {
-                o.priority = tiler::parse_source_priority(*s, at + "/priority");
-            } catch (const InputError& e) {
-                check.error(at + "/priority", e.what());
-            }
-        }
-    }
+    parse_priority(check, value, at, o);
     if (value.contains("store") && !value["store"].is_null()) {
         const std::string p = at + "/store";
         if (!value["store"].is_string()) {

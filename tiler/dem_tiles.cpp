@@ -135,9 +135,7 @@ dem_tile_heights(const Layer& layer, const ValidTile& tile, const CancelFn& canc
     TB_ASSERT(tile.scheme() == Scheme::Mercator);
     const TileId& id = tile.id();
     const auto checkpoint = [&](const char* before) {
-        if (cancelled && cancelled()) {
-            throw Cancelled("DEM tile " + tile_name(id) + " cancelled before " + before);
-        }
+        throw_if_cancelled(cancelled, "DEM tile", id, before);
     };
     const LayerOptions& o = layer.options();
     const DemTilePlan plan = dem_tile_plan(layer);

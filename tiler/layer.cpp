@@ -102,8 +102,8 @@ private:
 // A checkpoint of a tile: throws Cancelled, naming the tile and the phase it stopped before,
 // when the running make_tile's CancelFn says so.
 void checkpoint(const TileId& id, const char* before) {
-    if (t_cancelled != nullptr && (*t_cancelled)()) {
-        throw Cancelled("tile " + tile_name(id) + " cancelled before " + before);
+    if (t_cancelled != nullptr) {
+        throw_if_cancelled(*t_cancelled, "tile", id, before);
     }
 }
 
@@ -535,6 +535,15 @@ std::shared_ptr<const Layer> Layer::open(const LayerOptions& options) {
     LayerOptions expanded = options;
     expanded.sources = expand_dem_inputs(options.sources);
     return std::make_shared<DemLayer>(expanded);
+}
+
+void throw_if_cancelled(const CancelFn& cancelled,
+                        const char* kind,
+                        const TileId& id,
+                        const char* before) {
+    if (cancelled && cancelled()) {
+        throw Cancelled(std::string(kind) + " " + tile_name(id) + " cancelled before " + before);
+    }
 }
 
 void check_eps(double eps, const std::string& what) {

@@ -119,6 +119,12 @@ using CancelFn = std::function<bool()>;
 struct Cancelled : Error {
     using Error::Error;
 };
+// A checkpoint: throws Cancelled ("<kind> <tile> cancelled before <before>") when `cancelled`
+// says stop; an empty one never does.
+void throw_if_cancelled(const CancelFn& cancelled,
+                        const char* kind,
+                        const TileId& id,
+                        const char* before);
 
 class Layer {
 public:

@@ -197,4 +197,15 @@ TileRange tiles_covering(Scheme scheme, const LonLatBox& box, int z) {
     return range;
 }
 
+TileRange tiles_in_families(Scheme scheme, const LonLatBox& deep, const LonLatBox& all, int z) {
+    TileRange r = tiles_covering(scheme, deep, z);
+    if (r.empty() || z == 0) {
+        return r;
+    }
+    const TileRange cut = tiles_covering(scheme, all, z);
+    r.x0 = std::max(r.x0 & ~std::int64_t{1}, cut.x0), r.x1 = std::min(r.x1 | 1, cut.x1);
+    r.y0 = std::max(r.y0 & ~std::int64_t{1}, cut.y0), r.y1 = std::min(r.y1 | 1, cut.y1);
+    return r;
+}
+
 } // namespace tb::tiler

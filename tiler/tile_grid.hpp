@@ -90,4 +90,11 @@ LonLatBox tile_bounds(Scheme scheme, const TileId& id);
 // Tiles of zoom z that intersect a lon/lat box (clamped to the scheme's extent).
 TileRange tiles_covering(Scheme scheme, const LonLatBox& box, int z);
 
+// The tiles of zoom z over `deep` (where data goes this deep), widened to whole families (the
+// four children of one parent) and cut to the tiles over `all` (where any data lies): a parent
+// that refines into children refines into every child over its data, so a client replacing it
+// never loses the part of it that no deep data covers. For z = 0, or `deep` = `all`, the tiles
+// over `deep`.
+TileRange tiles_in_families(Scheme scheme, const LonLatBox& deep, const LonLatBox& all, int z);
+
 } // namespace tb::tiler

@@ -267,8 +267,8 @@ TEST_CASE("priority: \"finest\" (the default) or \"listed\"; anything else is na
     CHECK(parse(R"(, "priority": "listed")").layers[0].options.priority ==
           tb::tiler::SourcePriority::Listed);
     CHECK_THROWS_WITH_AS(parse(R"(, "priority": "first")"),
-                         doctest::Contains("/layers/0/priority: 'first' is not a priority; use "
-                                           "'finest'"),
+                         doctest::Contains(R"(/layers/0/priority: expected one of "finest", )"
+                                           R"("listed", got "first")"),
                          tb::InputError);
     CHECK_THROWS_WITH_AS(
         parse(R"(, "priority": 1)"), doctest::Contains("/layers/0/priority"), tb::InputError);

@@ -413,14 +413,34 @@ TEST_CASE("a collection of a UTM survey over geographic SRTM: each keeps its res
     coarse_only.sources = {coarse};
     const int coarse_deepest = Layer::open(coarse_only)->max_zoom();
     REQUIRE(layer->max_zoom() >= coarse_deepest + 2);
-    const auto same = [](const TileRange& a, const TileRange& b) {
-        return a.z == b.z && a.x0 == b.x0 && a.x1 == b.x1 && a.y0 == b.y0 && a.y1 == b.y1;
+    const auto inside = [](const TileRange& r, std::int64_t x, std::int64_t y) {
+        return !r.empty() && x >= r.x0 && x <= r.x1 && y >= r.y0 && y <= r.y1;
     };
+    const LonLatBox survey = DemSource::open({fine})->footprint();
     for (int z = layer->min_zoom(); z <= layer->max_zoom(); ++z) {
         CAPTURE(z);
-        const DemSource& deep = z > coarse_deepest ? *DemSource::open({fine}) : *alone;
-        const TileRange expected = tiles_covering(Scheme::Geodetic, deep.footprint(), z);
-        CHECK(same(layer->tiles_at(z), expected));
+        const TileRange r = layer->tiles_at(z);
+        const TileRange all = tiles_covering(Scheme::Geodetic, alone->footprint(), z);
+        const TileRange deep = tiles_covering(Scheme::Geodetic, survey, z);
+        if (z <= coarse_deepest) {
+            CHECK((r.x0 == all.x0 && r.x1 == all.x1 && r.y0 == all.y0 && r.y1 == all.y1));
+            continue;
+        }
+        // Only around the survey: every tile over it, and no more than its families hold.
+        CHECK((inside(r, deep.x0, deep.y0) && inside(r, deep.x1, deep.y1)));
+        CHECK(r.count() <= (deep.x1 - deep.x0 + 3) * (deep.y1 - deep.y0 + 3));
+        // A parent refines into every child over data, or into none: replacing it never drops
+        // the coarse data it drew (3D Tiles' REPLACE).
+        for (std::int64_t y = r.y0; y <= r.y1; ++y) {
+            for (std::int64_t x = r.x0; x <= r.x1; ++x) {
+                CHECK((z == layer->min_zoom() || inside(layer->tiles_at(z - 1), x / 2, y / 2)));
+                for (std::int64_t sy = y & ~1; sy <= (y | 1); ++sy) {
+                    for (std::int64_t sx = x & ~1; sx <= (x | 1); ++sx) {
+                        CHECK(inside(r, sx, sy) == inside(all, sx, sy));
+                    }
+                }
+            }
+        }
     }
     std::string layer_json;
     REQUIRE(layer->document("layer.json", layer_json));
@@ -457,4 +477,34 @@ TEST_CASE("a collection of a UTM survey over geographic SRTM: each keeps its res
 
     static const tb_oracle::Geoid geoid;
     judge_pixels(options, ranked_pixels(fine, coarse, geoid), Guarantee::Measured, false);
+}
+
+TEST_CASE("a mosaic's gaps between its files are voids, whichever file declares nodata") {
+    tb_test::ScratchDir dir;
+    // Two 3" cells of one grid with a gap of 0.05 degrees between them; only one declares nodata.
+    const auto cell = [&](const std::string& name, double west, std::optional<double> nodata) {
+        tb_test::Fixture f;
+        f.width = 60, f.height = 60;
+        f.type = GDT_Int16;
+        f.epsg = 4326;
+        f.nodata = nodata;
+        f.geotransform = std::array<double, 6>{west, 1.0 / 1200, 0, 46.4, 0, -1.0 / 1200};
+        f.values.assign(3600, 700);
+        return tb_test::write_fixture(dir.file(name), f);
+    };
+    const std::string plain = cell("plain.tif", 7.6, std::nullopt);
+    const std::string declared = cell("declared.tif", 7.7, -32768.0);
+    for (const auto& order :
+         {std::vector<std::string>{plain, declared}, std::vector<std::string>{declared, plain}}) {
+        const auto mosaic = DemSource::open(order);
+        CHECK(mosaic->parts().size() == 1); // one grid: one mosaic
+        const double step = 180.0 / std::exp2(12) / 256;
+        const auto column = [&](double lon) {
+            return static_cast<std::int64_t>(std::llround((lon + 180) / step));
+        };
+        const auto row = static_cast<std::int64_t>(std::llround((90 - 46.375) / step));
+        CHECK(mosaic->sample(Scheme::Geodetic, 12, 256, column(7.62), row, 1, 1).valid[0] == 1);
+        CHECK(mosaic->sample(Scheme::Geodetic, 12, 256, column(7.675), row, 1, 1).valid[0] == 0);
+        CHECK(mosaic->sample(Scheme::Geodetic, 12, 256, column(7.72), row, 1, 1).valid[0] == 1);
+    }
 }

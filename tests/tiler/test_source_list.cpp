@@ -76,7 +76,8 @@ TEST_CASE("source list expands a directory recursively and sorted, rasters only"
     CHECK(expand_dem_inputs({dems.string()}) == expected);
 }
 
-TEST_CASE("source list expands a glob, sorted, and a directory it matches as a directory") {
+TEST_CASE("source list expands a glob, sorted, sidecars skipped, and a directory it matches as "
+          "a directory") {
     const ScratchDir dir;
     const fs::path d = dir.path / "d";
     tif(d / "x2.tif");
@@ -91,6 +92,10 @@ TEST_CASE("source list expands a glob, sorted, and a directory it matches as a d
                          (d / "set" / "s1.tif").string(),
                          (d / "set" / "s2.tif").string()};
     CHECK(expand_dem_inputs({(d / "x?.tif").string(), (d / "s*").string()}) == expected);
+    // Files a glob matches skip sidecars as a directory's do.
+    text(d / "y.tif.aux.xml", "<PAMDataset></PAMDataset>\n");
+    text(d / "y.tif.ovr", "");
+    CHECK(expand_dem_inputs({(d / "y*").string()}) == Paths{(d / "y.tif").string()});
 }
 
 TEST_CASE("source list reads a list file with comments, relative paths, a directory and a glob") {
@@ -192,4 +197,13 @@ TEST_CASE("source list rejects a glob matching nothing, naming the list line it 
     CHECK(error_of({list}) == list + ":2: " + (dir.path / "n*.tif").string() +
                                   ": matches no file; check the pattern and the directory it "
                                   "names");
+}
+
+TEST_CASE("source list takes an ESRI ASCII grid named .txt as a raster, not as a list file") {
+    const ScratchDir dir;
+    const std::string grid = text(dir.path / "grids" / "grid.txt",
+                                  "ncols 2\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 1\n"
+                                  "1 2\n3 4\n");
+    CHECK(expand_dem_inputs({grid}) == Paths{grid});
+    CHECK(expand_dem_inputs({(dir.path / "grids").string()}) == Paths{grid});
 }

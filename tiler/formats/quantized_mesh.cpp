@@ -955,8 +955,10 @@ TileRange terrain_available(const TerrainSpec& spec, int z) {
     if (z == 0) {
         return TileRange{0, 0, 0, 1, 0};
     }
-    return tiles_covering(
-        Scheme::Geodetic, spec.bounds_at ? spec.bounds_at(z) : spec.data_bounds, z);
+    return tiles_in_families(Scheme::Geodetic,
+                             spec.bounds_at ? spec.bounds_at(z) : spec.data_bounds,
+                             spec.data_bounds,
+                             z);
 }
 
 std::string terrain_layer_json(const TerrainSpec& spec) {

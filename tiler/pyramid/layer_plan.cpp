@@ -126,7 +126,7 @@ TileRange LayerPlan::tiles_at(int z) const {
     if (z < min_zoom_ || z > max_zoom_) {
         return TileRange{z, 0, 0, -1, -1};
     }
-    return tiles_covering(options_.scheme, footprint_at(z), z);
+    return tiles_in_families(options_.scheme, footprint_at(z), footprint_, z);
 }
 
 bool LayerPlan::may_have_tile(const ValidTile& tile) const {
@@ -149,7 +149,8 @@ bool LayerPlan::terrain_has_data(const ValidTile& tile) const {
     if (tile.z() < terrain_min_zoom_ || tile.z() > max_zoom_) {
         return false;
     }
-    const TileRange r = tiles_covering(options_.scheme, footprint_at(tile.z()), tile.z());
+    const TileRange r =
+        tiles_in_families(options_.scheme, footprint_at(tile.z()), footprint_, tile.z());
     return !r.empty() && tile.x() >= r.x0 && tile.x() <= r.x1 && tile.y() >= r.y0 &&
            tile.y() <= r.y1;
 }

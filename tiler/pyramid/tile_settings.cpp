@@ -56,8 +56,10 @@ Manifest tile_settings(const Layer& layer) {
                        "[" + json_number(o.valid_range.low) + ", " +
                            json_number(o.valid_range.high) + "]");
     }
-    if (o.priority != SourcePriority::Finest) { // absent by default, as valid_range
-        m.emplace_back("priority", json_string(to_string(o.priority)));
+    if (o.sources.size() > 1) {
+        // Overlapping DEMs: the first given wins within a mosaic (before collections, the last
+        // did), and groups rank by the priority. Absent for one DEM, so its manifests stay equal.
+        m.emplace_back("overlap", json_string(std::string("first, ") + to_string(o.priority)));
     }
     std::string eps = "[";
     for (int z = layer.min_zoom(); z <= layer.max_zoom(); ++z) {

@@ -15,6 +15,13 @@ bool meets(const LonLatBox& a, const LonLatBox& b) {
     return a.west <= b.east && b.west <= a.east && a.south <= b.north && b.south <= a.north;
 }
 
+LonLatBox united(const LonLatBox& a, const LonLatBox& b) {
+    return {std::min(a.west, b.west),
+            std::min(a.south, b.south),
+            std::max(a.east, b.east),
+            std::max(a.north, b.north)};
+}
+
 // The collection's description: what a layer plans with (the finest member's resolution, the
 // union of footprints and height ranges) and what `info` prints.
 DemInfo describe_members(const std::vector<std::shared_ptr<const DemSource>>& members) {
@@ -59,11 +66,7 @@ public:
         : members_(std::move(members)), info_(describe_members(members_)) {
         footprint_ = members_.front()->footprint();
         for (const auto& m : members_) {
-            const LonLatBox b = m->footprint();
-            footprint_ = {std::min(footprint_.west, b.west),
-                          std::min(footprint_.south, b.south),
-                          std::max(footprint_.east, b.east),
-                          std::max(footprint_.north, b.north)};
+            footprint_ = united(footprint_, m->footprint());
         }
         info_.lonlat_bounds = std::array<double, 4>{
             footprint_.west, footprint_.south, footprint_.east, footprint_.north};
@@ -108,7 +111,8 @@ public:
 
     std::optional<PixelGrid> pixel_grid(Scheme) const override { return std::nullopt; }
     std::vector<double> read_pixels(std::int64_t, std::int64_t, int, int) const override {
-        throw InputError(info_.path + ": a collection of DEMs has no single pixel grid");
+        TB_ASSERT(!"read_pixels needs pixel_grid(), which a collection has not");
+        return {};
     }
     bool window_empty(std::int64_t, std::int64_t, int, int) const override { return false; }
 
@@ -164,11 +168,7 @@ LonLatBox CollectionSource::footprint_at(Scheme scheme, int z, int size) const {
             continue;
         }
         const LonLatBox b = members_[m]->footprint();
-        out = out ? LonLatBox{std::min(out->west, b.west),
-                              std::min(out->south, b.south),
-                              std::max(out->east, b.east),
-                              std::max(out->north, b.north)}
-                  : b;
+        out = out ? united(*out, b) : b;
     }
     return *out;
 }
@@ -222,14 +222,15 @@ void CollectionSource::pixels_in(const LonLatBox& box, const PixelVisitor& visit
         }
         batch.clear();
     };
-    for (const auto& m : members_) {
-        if (!meets(m->footprint(), box)) {
+    for (std::size_t k = 0; k < members_.size(); ++k) {
+        const DemSource& m = *members_[k];
+        if (!meets(m.footprint(), box)) {
             continue;
         }
         if (above.empty()) {
-            m->pixels_in(box, visit);
+            m.pixels_in(box, visit);
         } else {
-            m->pixels_in(box, [&](const SourcePixel& p) {
+            m.pixels_in(box, [&](const SourcePixel& p) {
                 batch.push_back(p);
                 if (batch.size() == kBatch) {
                     flush();
@@ -237,7 +238,9 @@ void CollectionSource::pixels_in(const LonLatBox& box, const PixelVisitor& visit
             });
             flush();
         }
-        above.push_back(m->coverage(box));
+        if (k + 1 < members_.size()) { // the last member covers no one
+            above.push_back(m.coverage(box));
+        }
     }
 }
 

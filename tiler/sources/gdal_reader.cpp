@@ -728,10 +728,16 @@ std::unique_ptr<const PixelCoverage> GdalDemSource::coverage(const LonLatBox& bo
     if (!w) {
         return std::make_unique<Coverage>(*this, Window{}, std::vector<std::uint8_t>());
     }
-    const std::vector<double> heights = read_pixels(w->column0, w->row0, w->width, w->height);
-    std::vector<std::uint8_t> valid(heights.size());
-    for (std::size_t k = 0; k < heights.size(); ++k) {
-        valid[k] = std::isnan(heights[k]) ? 0 : 1;
+    // A byte per pixel, read in strips as pixels_in reads (a window of doubles would be 8).
+    std::vector<std::uint8_t> valid(static_cast<std::size_t>(w->width) * w->height);
+    const int strip = std::max(1, 65536 / w->width);
+    for (int j0 = 0; j0 < w->height; j0 += strip) {
+        const int rows = std::min(strip, w->height - j0);
+        const std::vector<double> heights = read_pixels(w->column0, w->row0 + j0, w->width, rows);
+        std::uint8_t* out = valid.data() + static_cast<std::size_t>(j0) * w->width;
+        for (std::size_t k = 0; k < heights.size(); ++k) {
+            out[k] = std::isnan(heights[k]) ? 0 : 1;
+        }
     }
     return std::make_unique<Coverage>(*this, *w, std::move(valid));
 }
@@ -901,20 +907,32 @@ namespace {
 
 // One in-memory VRT mosaic of files that share a CRS and a pixel size; the first given wins
 // where they overlap (a VRT draws its last source on top, so they are handed over reversed).
+// Where no file lies the mosaic reads its own nodata value, which is always set: --nodata, else
+// the first file's that has one, else NaN. (Without it GDAL takes the nodata of the first file
+// it is handed, and where that has none, the gaps between files read as 0 m of data.)
 std::shared_ptr<const DemSource> open_mosaic(const std::vector<std::string>& paths,
+                                             const std::vector<DemInfo>& infos,
                                              std::optional<double> nodata,
                                              const ValidRange& range) {
     const std::string names = inputs_text(paths);
     CslPtr argv(CSLAddString(nullptr, "-b"));
     argv.reset(CSLAddString(argv.release(), "1"));
+    char value[32];
     if (nodata) {
-        char value[32];
         std::snprintf(value, sizeof value, "%.17g", *nodata);
-        for (const char* option : {"-srcnodata", "-vrtnodata"}) {
-            argv.reset(CSLAddString(argv.release(), option));
-            argv.reset(CSLAddString(argv.release(), value));
+        argv.reset(CSLAddString(argv.release(), "-srcnodata"));
+        argv.reset(CSLAddString(argv.release(), value));
+    } else {
+        std::snprintf(value, sizeof value, "nan");
+        for (const DemInfo& info : infos) {
+            if (info.nodata) {
+                std::snprintf(value, sizeof value, "%.17g", *info.nodata);
+                break;
+            }
         }
     }
+    argv.reset(CSLAddString(argv.release(), "-vrtnodata"));
+    argv.reset(CSLAddString(argv.release(), value));
     std::unique_ptr<GDALBuildVRTOptions, BuildVrtOptionsDeleter> options(
         GDALBuildVRTOptionsNew(argv.get(), nullptr));
     std::vector<const char*> sources;
@@ -958,8 +976,12 @@ std::vector<std::vector<std::size_t>> group_by_grid(const std::vector<std::strin
     const auto same_grid = [&](std::size_t a, std::size_t b) {
         const auto& g = infos[a].geotransform;
         const auto& h = infos[b].geotransform;
-        const auto close = [](double x, double y) {
-            return std::abs(x - y) <= 1e-9 * std::max(std::abs(x), std::abs(y));
+        // Pixel sizes that differ by a rounding (a re-export) drift less than 1 % of a pixel
+        // across either file.
+        const double span =
+            std::max({infos[a].width, infos[a].height, infos[b].width, infos[b].height, 1});
+        const auto close = [span](double x, double y) {
+            return std::abs(x - y) * span <= 0.01 * std::max(std::abs(x), std::abs(y));
         };
         const char* options[] = {"IGNORE_DATA_AXIS_TO_SRS_AXIS_MAPPING=YES", nullptr};
         return g[2] == 0 && g[4] == 0 && h[2] == 0 && h[4] == 0 && close(g[1], h[1]) &&
@@ -1021,17 +1043,22 @@ std::shared_ptr<const DemSource> DemSource::open(const std::vector<std::string>&
             continue;
         }
         std::vector<std::string> files;
+        std::vector<DemInfo> group_infos;
         for (std::size_t k : group) {
             files.push_back(paths[k]);
+            group_infos.push_back(infos[k]);
         }
-        members.push_back(open_mosaic(files, nodata, range));
+        members.push_back(open_mosaic(files, group_infos, nodata, range));
     }
     if (members.size() == 1) {
         return members.front();
     }
     if (priority == SourcePriority::Finest) {
+        // Source pixels per sample of one lattice: for lon/lat DEMs independent of latitude, so
+        // two of the same angular pixel size tie and keep the order given.
         std::stable_sort(members.begin(), members.end(), [](const auto& a, const auto& b) {
-            return a->info().resolution_m < b->info().resolution_m;
+            return a->pixels_per_sample(Scheme::Geodetic, 10, 256) >
+                   b->pixels_per_sample(Scheme::Geodetic, 10, 256);
         });
     }
     return make_collection_source(std::move(members));

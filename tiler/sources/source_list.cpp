@@ -53,17 +53,23 @@ bool ends_with_any(const std::string& name, std::initializer_list<std::string_vi
         suffixes.begin(), suffixes.end(), [&](std::string_view s) { return lower.ends_with(s); });
 }
 
+// A raster GDAL recognizes (an ESRI ASCII grid may be named .txt).
+bool is_raster(const std::string& path) {
+    init_gdal();
+    return GDALIdentifyDriverEx(path.c_str(), GDAL_OF_RASTER, nullptr, nullptr) != nullptr;
+}
+
 bool is_list_file(const std::string& path) {
     std::error_code ec;
     return !has_nul(path) && fs::is_regular_file(path, ec) &&
-           ends_with_any(fs::path(path).filename().string(), {".txt", ".list"});
+           ends_with_any(fs::path(path).filename().string(), {".txt", ".list"}) && !is_raster(path);
 }
 
 // Files that sit beside rasters and describe them (overviews, PAM metadata, masks, world files,
-// projections), or are notes and list files: GDAL identifies some of these as rasters too.
+// projections): GDAL identifies some of these as rasters too. Notes and list files (.txt) are
+// skipped by a directory's expansion because GDAL does not identify them.
 bool is_sidecar(const std::string& name) {
-    return ends_with_any(name,
-                         {".ovr", ".aux.xml", ".msk", ".xml", ".tfw", ".prj", ".txt", ".list"});
+    return ends_with_any(name, {".ovr", ".aux.xml", ".msk", ".xml", ".tfw", ".prj"});
 }
 
 // glob(3) reads a backslash as an escape, so a directory named with * ? [ stays literal.
@@ -102,10 +108,9 @@ void expand_directory(const std::string& dir, Found& found) {
     }
     // The directory's own order depends on the file system; the output must not.
     std::sort(files.begin(), files.end());
-    init_gdal();
     bool any = false;
     for (const fs::path& file : files) {
-        if (GDALIdentifyDriverEx(file.c_str(), GDAL_OF_RASTER, nullptr, nullptr) != nullptr) {
+        if (is_raster(file.string())) {
             add(found, file.string());
             any = true;
         }
@@ -139,8 +144,8 @@ void expand_glob(const std::string& pattern, const std::string& shown, Found& fo
         std::error_code ec;
         if (fs::is_directory(match, ec)) {
             expand_directory(match, found);
-        } else {
-            add(found, match);
+        } else if (!is_sidecar(fs::path(match).filename().string())) {
+            add(found, match); // 'dems/*' names the .aux.xml and .ovr beside each DEM too
         }
     }
 }

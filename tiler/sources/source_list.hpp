@@ -11,15 +11,16 @@ namespace tb::tiler {
 // and what to do.
 //
 // Each input is, in this order of tests:
-// - an existing regular file ending in .txt or .list (any case): a list file, one input per line
+// - an existing regular file ending in .txt or .list (any case) that GDAL does not identify as
+//   a raster (an ESRI ASCII grid may be named .txt): a list file, one input per line
 //   (trimmed; blank lines and lines starting with '#' skipped; relative paths relative to the
 //   list file's directory), each expanded as a directory, glob or file. A list file naming
 //   another list file, or naming nothing, is an InputError.
 // - an existing directory: every regular file under it (recursively, sorted by path; hidden
 //   files and directories skipped, symlinked directories not entered) that GDAL identifies as a
-//   raster, sidecars (.ovr .aux.xml .msk .xml .tfw .prj .txt .list) excluded. None: InputError.
-// - a missing path holding any of * ? [: a glob(3) pattern, its matches sorted; a matched
-//   directory is expanded as above. No match: InputError.
+//   raster, sidecars (.ovr .aux.xml .msk .xml .tfw .prj) excluded. None: InputError.
+// - a missing path holding any of * ? [: a glob(3) pattern, its matches sorted, sidecars
+//   skipped; a matched directory is expanded as above. No match: InputError.
 // - anything else (a file, a VRT, a missing path): returned unchanged, for GDAL to open or to
 //   report missing.
 // An empty `inputs` gives an empty result (the caller reports that no DEM was given).
