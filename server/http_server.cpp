@@ -859,9 +859,12 @@ struct HttpServer::Impl {
     std::mutex stop_mutex;
     bool stop_requested = false;
     std::vector<std::filesystem::path> web_roots; // canonical; files are served from these only
-    std::shared_ptr<const Blob> layers_blob;      // /layers never changes while serving
-    std::string keep_alive;                       // the Keep-Alive header cpp-httplib sends
-    bool cors_any = false;                        // cors_origins holds "*"
+    // /layers of the layer set it was made from; made again once a reload swaps the set.
+    std::mutex layers_mutex;
+    std::shared_ptr<const Blob> layers_blob;
+    std::shared_ptr<const LayerSet> layers_set;
+    std::string keep_alive; // the Keep-Alive header cpp-httplib sends
+    bool cors_any = false;  // cors_origins holds "*"
     // A list of origins (no "*"): every answer depends on Origin, one asked without it too, so
     // that a shared cache never gives that one to a page of a listed origin.
     bool vary_origin = false;
@@ -904,12 +907,6 @@ struct HttpServer::Impl {
                 web_roots.push_back(modules);
             }
         }
-        layers_blob = [this] {
-            auto blob = std::make_shared<Blob>();
-            blob->bytes = layers_json();
-            blob->etag = make_etag(blob->bytes);
-            return blob;
-        }();
         install();
         ConnectionLimits capped = limits;
         capped.max_connections = connection_capacity(limits.max_connections);
@@ -1212,11 +1209,24 @@ struct HttpServer::Impl {
         return vary_origin ? "Origin, Accept, Accept-Encoding" : "Accept, Accept-Encoding";
     }
 
-    std::string layers_json() const {
+    // /layers as the layer set now served says (a reload swaps the set).
+    std::shared_ptr<const Blob> layers_document() {
+        const auto set = tiles.layers();
+        std::lock_guard lock(layers_mutex);
+        if (!layers_blob || layers_set != set) {
+            auto blob = std::make_shared<Blob>();
+            blob->bytes = layers_json(set);
+            blob->etag = make_etag(blob->bytes);
+            layers_blob = std::move(blob);
+            layers_set = set;
+        }
+        return layers_blob;
+    }
+
+    std::string layers_json(const std::shared_ptr<const LayerSet>& set) const {
         std::ostringstream out;
         out << "{\"layers\":[";
         bool first = true;
-        const auto set = tiles.layers();
         for (const auto& served : set->served) {
             const auto& layer = *served.layer;
             const auto& o = layer.options();
@@ -1509,7 +1519,8 @@ struct HttpServer::Impl {
 
         server.Get("/layers", [this](const httplib::Request& req, httplib::Response& res) {
             t_request.route = "layers";
-            send_blob(req, res, *layers_blob, "application/json", kDocumentCacheControl, &tiles);
+            send_blob(
+                req, res, *layers_document(), "application/json", kDocumentCacheControl, &tiles);
         });
 
         // Raster DEM tiles and their TileJSON (EPSG:3857 XYZ, whatever the layer's scheme).

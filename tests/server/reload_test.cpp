@@ -61,8 +61,9 @@ struct Serving {
     test::TempDir dir;
     test::Child child;
     int port = 0;
-    std::string first; // kTile's body
-    std::string etag;  // and ETag
+    std::string first;  // kTile's body
+    std::string etag;   // and ETag
+    std::string layers; // /layers at start
 
     explicit Serving(int watch_interval_s) {
         test::write_dem(dir / "hills.asc", 257);
@@ -74,6 +75,9 @@ struct Serving {
         REQUIRE(res->status == 200);
         first = res->body;
         etag = res->get_header_value("ETag");
+        const auto listed = c.Get("/layers");
+        REQUIRE(listed);
+        layers = listed->body;
     }
     std::string log() const { return test::read_file(dir / "serve.log"); }
     void stop() {
@@ -101,6 +105,12 @@ TEST_CASE("on SIGHUP a replaced source is served anew: the new layer's bytes, a 
     CHECK(after->body == expected);
     CHECK(after->get_header_value("ETag") != s.etag);
     CHECK(s.log().find("reload: layer hills now serves its new sources") != std::string::npos);
+    // /layers describes the new layer too (its bounds follow the smaller DEM).
+    httplib::Client c("127.0.0.1", s.port);
+    const auto listed = c.Get("/layers");
+    REQUIRE(listed);
+    CHECK(listed->body != s.layers);
+    CHECK(listed->body.find("\"hills\"") != std::string::npos);
     // The store holds the new tile (written as it was made), never the old one.
     auto store = tiler::TileStore::open(s.dir / "tiles");
     const auto stored = store->get(tiler::TileKey{"hills", {8, 272, 210}, tiler::Format::Glb, -1});
