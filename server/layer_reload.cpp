@@ -56,7 +56,7 @@ std::vector<std::string> source_stamps(const std::vector<std::string>& sources) 
     std::vector<std::string> stamps;
     std::vector<std::string> files;
     try {
-        files = tiler::expand_dem_inputs(sources); // a file added to a directory is a change
+        files = tiler::watched_files(sources); // a file added to a directory is a change
     } catch (const InputError&) {
         files = sources; // the reload that follows reports it
     }

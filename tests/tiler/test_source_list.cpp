@@ -207,3 +207,15 @@ TEST_CASE("source list takes an ESRI ASCII grid named .txt as a raster, not as a
     CHECK(expand_dem_inputs({grid}) == Paths{grid});
     CHECK(expand_dem_inputs({(dir.path / "grids").string()}) == Paths{grid});
 }
+
+TEST_CASE("source list watches every file of a directory without asking GDAL, sidecars and hidden "
+          "files skipped") {
+    const ScratchDir dir;
+    const fs::path d = dir.path / "d";
+    const std::string a = tif(d / "a.tif");
+    const std::string notes = text(d / "notes.md", "not a raster\n");
+    text(d / "a.tif.aux.xml", "<PAMDataset></PAMDataset>\n");
+    text(d / ".hidden.tif", "");
+    CHECK(tb::tiler::watched_files({d.string()}) == Paths{a, notes});
+    CHECK(expand_dem_inputs({d.string()}) == Paths{a});
+}

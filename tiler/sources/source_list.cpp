@@ -26,6 +26,7 @@ namespace fs = std::filesystem;
 struct Found {
     std::vector<std::string> paths;
     std::set<std::string> seen;
+    bool identify = true; // a directory's files: only those GDAL identifies as rasters
 };
 
 // A path with a NUL in it would be cut short by every system call (naming some other file), so
@@ -110,7 +111,7 @@ void expand_directory(const std::string& dir, Found& found) {
     std::sort(files.begin(), files.end());
     bool any = false;
     for (const fs::path& file : files) {
-        if (is_raster(file.string())) {
+        if (!found.identify || is_raster(file.string())) {
             add(found, file.string());
             any = true;
         }
@@ -207,10 +208,7 @@ void expand_list_file(const std::string& list, Found& found) {
     }
 }
 
-} // namespace
-
-std::vector<std::string> expand_dem_inputs(const std::vector<std::string>& inputs) {
-    Found found;
+std::vector<std::string> expand_into(const std::vector<std::string>& inputs, Found& found) {
     for (const std::string& input : inputs) {
         if (is_list_file(input)) {
             expand_list_file(input, found);
@@ -219,6 +217,19 @@ std::vector<std::string> expand_dem_inputs(const std::vector<std::string>& input
         }
     }
     return found.paths;
+}
+
+} // namespace
+
+std::vector<std::string> expand_dem_inputs(const std::vector<std::string>& inputs) {
+    Found found;
+    return expand_into(inputs, found);
+}
+
+std::vector<std::string> watched_files(const std::vector<std::string>& inputs) {
+    Found found;
+    found.identify = false;
+    return expand_into(inputs, found);
 }
 
 std::string inputs_text(const std::vector<std::string>& inputs) {

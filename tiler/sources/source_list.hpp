@@ -26,6 +26,11 @@ namespace tb::tiler {
 // An empty `inputs` gives an empty result (the caller reports that no DEM was given).
 std::vector<std::string> expand_dem_inputs(const std::vector<std::string>& inputs);
 
+// The files to watch for changes to `inputs`: as expand_dem_inputs, but every file of a
+// directory (sidecars and hidden ones skipped) without asking GDAL which are rasters, so that a
+// check every few seconds over thousands of files costs a stat each.
+std::vector<std::string> watched_files(const std::vector<std::string>& inputs);
+
 // Several DEMs named in one line of a message or log: the first three, and how many more.
 std::string inputs_text(const std::vector<std::string>& inputs);
 
