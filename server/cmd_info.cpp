@@ -106,6 +106,9 @@ std::string describe_zoom(const tiler::Layer& layer, int z) {
     case tiler::ZoomSource::Lattice:
         break;
     }
+    if (layer.source().parts().size() > 1) {
+        return "each DEM at its own level, checked at full resolution";
+    }
     return describe_read(layer.source().read_level(o.scheme, z, o.tile_size)) +
            ", checked at full resolution";
 }
