@@ -409,3 +409,28 @@ TEST_CASE("a NUL byte in a DEM path is refused, not cut off") {
         CHECK(std::string(e.what()).find(dem + "\\x00.bak") != std::string::npos);
     }
 }
+
+TEST_CASE("inspect_metadata says what inspect_dem says of a file, without its heights") {
+    ScratchDir dir;
+    Fixture f;
+    f.width = 30, f.height = 20;
+    f.type = GDT_Int16;
+    f.epsg = 32632;
+    f.nodata = -9999;
+    f.geotransform = std::array<double, 6>{400000, 10, 0, 5100000, 0, -10};
+    f.values.assign(600, 350);
+    const std::string path = tb_test::write_fixture(dir.file("m.tif"), f);
+    const tb::tiler::DemInfo full = tb::tiler::inspect_dem(path);
+    const tb::tiler::DemInfo meta = tb::tiler::inspect_metadata(path);
+    CHECK(full.has_data);
+    CHECK(full.max_height == 350);
+    CHECK_FALSE(meta.has_data);
+    CHECK(meta.width == full.width);
+    CHECK(meta.height == full.height);
+    CHECK(meta.data_type == full.data_type);
+    CHECK(meta.crs_id == full.crs_id);
+    CHECK(meta.nodata == full.nodata);
+    CHECK(meta.geotransform == full.geotransform);
+    CHECK(meta.lonlat_bounds == full.lonlat_bounds);
+    CHECK(meta.resolution_m == full.resolution_m);
+}

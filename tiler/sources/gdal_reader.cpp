@@ -958,7 +958,23 @@ std::shared_ptr<const DemSource> open_mosaic(const std::vector<std::string>& pat
     DemInfo info = inspect_dem(open_name, kExactRangeSamples, nodata, range);
     info.path = names;
     check_likely_nodata(info);
+    warn_outliers(info);
     return std::make_shared<GdalDemSource>(open_name, std::move(info));
+}
+
+// One group of group_by_grid, its files' heights read once: a file alone, or their mosaic.
+// `infos` are inspect_metadata's.
+std::shared_ptr<const DemSource> group_source(const std::vector<std::string>& files,
+                                              const std::vector<DemInfo>& infos,
+                                              std::optional<double> nodata,
+                                              const ValidRange& range) {
+    if (files.size() > 1) {
+        return open_mosaic(files, infos, nodata, range);
+    }
+    DemInfo info = inspect_dem(files[0], kExactRangeSamples, nodata, range);
+    check_likely_nodata(info);
+    warn_outliers(info);
+    return std::make_shared<GdalDemSource>(files[0], std::move(info));
 }
 
 // The files in groups that one VRT can hold: one CRS, one pixel size, no rotation. Groups keep
@@ -1015,11 +1031,16 @@ std::shared_ptr<const DemSource> DemSource::open(const std::vector<std::string>&
         throw InputError("--nodata: expected a finite number (NaN and infinite samples are "
                          "always nodata)");
     }
+    // Several files are read for their heights as their groups, not one by one (group_source).
+    const bool one = paths.size() == 1;
     std::vector<DemInfo> infos;
     for (const auto& path : paths) {
-        infos.push_back(inspect_dem(path, kExactRangeSamples, nodata, range));
-        check_likely_nodata(infos.back());
-        warn_outliers(infos.back());
+        infos.push_back(one ? inspect_dem(path, kExactRangeSamples, nodata, range)
+                            : inspect_metadata(path, nodata, range));
+        if (one) {
+            check_likely_nodata(infos.back());
+            warn_outliers(infos.back());
+        }
         GDALDatasetUniquePtr ds(GDALDataset::Open(
             path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY, nullptr, nullptr, nullptr));
         if (!ds) {
@@ -1038,17 +1059,13 @@ std::shared_ptr<const DemSource> DemSource::open(const std::vector<std::string>&
     }
     std::vector<std::shared_ptr<const DemSource>> members;
     for (const auto& group : group_by_grid(paths, infos)) {
-        if (group.size() == 1) {
-            members.push_back(std::make_shared<GdalDemSource>(paths[group[0]], infos[group[0]]));
-            continue;
-        }
         std::vector<std::string> files;
         std::vector<DemInfo> group_infos;
         for (std::size_t k : group) {
             files.push_back(paths[k]);
             group_infos.push_back(infos[k]);
         }
-        members.push_back(open_mosaic(files, group_infos, nodata, range));
+        members.push_back(group_source(files, group_infos, nodata, range));
     }
     if (members.size() == 1) {
         return members.front();

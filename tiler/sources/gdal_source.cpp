@@ -205,10 +205,14 @@ std::size_t block_cache_mb() {
     return static_cast<std::size_t>(GDALGetCacheMax64() >> 20);
 }
 
-DemInfo inspect_dem(const std::string& path,
-                    double exact_range_samples,
-                    std::optional<double> nodata_override,
-                    const ValidRange& range) {
+namespace {
+
+// inspect_dem, or with `scan` false inspect_metadata.
+DemInfo describe_file(const std::string& path,
+                      double exact_range_samples,
+                      std::optional<double> nodata_override,
+                      const ValidRange& range,
+                      bool scan) {
     init_gdal();
     namespace fs = std::filesystem;
     if (path.find('\0') != std::string::npos) {
@@ -344,6 +348,9 @@ DemInfo inspect_dem(const std::string& path,
         }
         info.resolution_m = size;
     }
+    if (!scan) {
+        return info;
+    }
 
     // Exact min/max over valid samples (metadata statistics are not trusted: some files carry
     // stale ones). Tileset bounding volumes are built from it, so an approximate range is only
@@ -370,6 +377,20 @@ DemInfo inspect_dem(const std::string& path,
     info.outlier_row = stats.outlier_row;
     info.outlier_height = stats.outlier_height;
     return info;
+}
+
+} // namespace
+
+DemInfo inspect_dem(const std::string& path,
+                    double exact_range_samples,
+                    std::optional<double> nodata,
+                    const ValidRange& range) {
+    return describe_file(path, exact_range_samples, nodata, range, true);
+}
+
+DemInfo
+inspect_metadata(const std::string& path, std::optional<double> nodata, const ValidRange& range) {
+    return describe_file(path, 0, nodata, range, false);
 }
 
 } // namespace tb::tiler

@@ -101,6 +101,12 @@ DemInfo inspect_dem(const std::string& path,
                     double exact_range_samples = kExactRangeSamples,
                     std::optional<double> nodata = std::nullopt,
                     const ValidRange& range = {});
+// The same without reading a sample: size, type, nodata, CRS, georeferencing, lon/lat bounds and
+// resolution (has_data false, no height range). For files read through a mosaic, which is
+// inspected whole instead: a collection of thousands of files is read once, not twice.
+DemInfo inspect_metadata(const std::string& path,
+                         std::optional<double> nodata = std::nullopt,
+                         const ValidRange& range = {});
 
 // Registers GDAL drivers once and routes GDAL's error handler to our logger. Idempotent. GDAL's
 // block cache starts at kDefaultBlockCacheMb unless GDAL_CACHEMAX is set (GDAL's own default,
