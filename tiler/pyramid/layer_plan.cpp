@@ -63,6 +63,9 @@ LayerPlan::LayerPlan(const LayerOptions& options, const DemSource& source)
     : options_(options), source_(source) {
     const DemInfo& info = source_.info();
     footprint_ = source_.footprint();
+    for (int z = 0; z <= kMaxZoom; ++z) {
+        footprints_.push_back(source_.footprint_at(options_.scheme, z, options_.tile_size));
+    }
     pixels_ = source_.pixel_grid(options_.scheme);
     summary_ok_ = pixels_ && summary_serves(*pixels_, options_.scheme);
     datum_ = options_.datum;
@@ -119,7 +122,8 @@ ZoomSource LayerPlan::zoom_source(int z) const {
 }
 
 LonLatBox LayerPlan::footprint_at(int z) const {
-    return source_.footprint_at(options_.scheme, z, options_.tile_size);
+    TB_ASSERT(z >= 0 && z <= kMaxZoom);
+    return footprints_[static_cast<std::size_t>(z)];
 }
 
 TileRange LayerPlan::tiles_at(int z) const {

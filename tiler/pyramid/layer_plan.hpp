@@ -87,6 +87,7 @@ private:
     mutable std::once_flag reach_once_;
     mutable std::vector<double> reach_;
     LonLatBox footprint_;
+    std::vector<LonLatBox> footprints_; // footprint_at, zooms 0..kMaxZoom (asked per tile)
     VerticalDatum datum_ = VerticalDatum::Egm96;
     int min_zoom_ = 0, max_zoom_ = 0;
     int terrain_min_zoom_ = 0;

@@ -15,6 +15,12 @@ bool meets(const LonLatBox& a, const LonLatBox& b) {
     return a.west <= b.east && b.west <= a.east && a.south <= b.north && b.south <= a.north;
 }
 
+// How fine a member is: its pixels per sample of one lattice (geodetic zoom 10), which for
+// lon/lat DEMs does not depend on latitude, so two of one angular pixel size tie.
+double fineness(const DemSource& m) {
+    return m.pixels_per_sample(Scheme::Geodetic, 10, 256);
+}
+
 LonLatBox united(const LonLatBox& a, const LonLatBox& b) {
     return {std::min(a.west, b.west),
             std::min(a.south, b.south),
@@ -49,9 +55,7 @@ DemInfo describe_members(const std::vector<std::shared_ptr<const DemSource>>& me
             out.max_height = out.has_data ? std::max(out.max_height, m.max_height) : m.max_height;
             out.has_data = true;
         }
-        if (k > 0) {
-            out.outliers += m.outliers;
-        }
+        out.outliers += k > 0 ? m.outliers : 0; // the first's are out's already
     }
     out.path = inputs_text(names);
     // Between members lie voids, filled as nodata is.
@@ -64,6 +68,11 @@ class CollectionSource final : public DemSource {
 public:
     explicit CollectionSource(std::vector<std::shared_ptr<const DemSource>> members)
         : members_(std::move(members)), info_(describe_members(members_)) {
+        for (std::size_t k = 1; k < members_.size(); ++k) {
+            if (fineness(*members_[k]) > fineness(*members_[finest_])) {
+                finest_ = k;
+            }
+        }
         footprint_ = members_.front()->footprint();
         for (const auto& m : members_) {
             footprint_ = united(footprint_, m->footprint());
@@ -88,10 +97,10 @@ public:
 
     // The finest member's: the pyramid goes as deep as the finest data.
     double pixels_per_sample(Scheme scheme, int z, int size) const override {
-        return members_[finest()]->pixels_per_sample(scheme, z, size);
+        return members_[finest_]->pixels_per_sample(scheme, z, size);
     }
     ReadLevel read_level(Scheme scheme, int z, int size) const override {
-        return members_[finest()]->read_level(scheme, z, size);
+        return members_[finest_]->read_level(scheme, z, size);
     }
     double tile_pixels(Scheme scheme, int z, int size) const override {
         double sum = 0;
@@ -134,17 +143,8 @@ public:
     }
 
 private:
-    std::size_t finest() const {
-        std::size_t best = 0;
-        for (std::size_t k = 1; k < members_.size(); ++k) {
-            if (members_[k]->info().resolution_m < members_[best]->info().resolution_m) {
-                best = k;
-            }
-        }
-        return best;
-    }
-
     std::vector<std::shared_ptr<const DemSource>> members_; // ranked, first wins
+    std::size_t finest_ = 0; // the member with the most pixels per lattice sample
     DemInfo info_;
     LonLatBox footprint_;
 };
@@ -290,7 +290,8 @@ const char* to_string(SourcePriority priority) {
 }
 
 std::shared_ptr<const DemSource>
-make_collection_source(std::vector<std::shared_ptr<const DemSource>> members) {
+make_collection_source(std::vector<std::shared_ptr<const DemSource>> members,
+                       SourcePriority priority) {
     TB_ASSERT(members.size() >= 2);
     for (const auto& m : members) {
         if (!m->georeferenced()) {
@@ -303,6 +304,11 @@ make_collection_source(std::vector<std::shared_ptr<const DemSource>> members) {
                              members.front()->info().path +
                              "'s are not; convert the DEMs to one vertical datum");
         }
+    }
+    if (priority == SourcePriority::Finest) {
+        std::stable_sort(members.begin(), members.end(), [](const auto& a, const auto& b) {
+            return fineness(*a) > fineness(*b);
+        });
     }
     return std::make_shared<CollectionSource>(std::move(members));
 }

@@ -18,9 +18,10 @@
 
 namespace tb::tiler {
 
-// `members`, ranked: first wins. At least two, each georeferenced, all with the same kind of
-// height (ellipsoidal or not); InputError otherwise.
+// `members` in the order given, ranked by `priority` (first wins). At least two, each
+// georeferenced, all with the same kind of height (ellipsoidal or not); InputError otherwise.
 std::shared_ptr<const DemSource>
-make_collection_source(std::vector<std::shared_ptr<const DemSource>> members);
+make_collection_source(std::vector<std::shared_ptr<const DemSource>> members,
+                       SourcePriority priority);
 
 } // namespace tb::tiler

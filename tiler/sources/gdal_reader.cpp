@@ -980,15 +980,8 @@ std::shared_ptr<const DemSource> group_source(const std::vector<std::string>& fi
 // The files in groups that one VRT can hold: one CRS, one pixel size, no rotation. Groups keep
 // the order of their first file, and files keep theirs within a group.
 std::vector<std::vector<std::size_t>> group_by_grid(const std::vector<std::string>& paths,
-                                                    const std::vector<DemInfo>& infos) {
-    std::vector<OGRSpatialReference> srs(paths.size());
-    for (std::size_t k = 0; k < paths.size(); ++k) {
-        GDALDatasetUniquePtr ds(GDALDataset::Open(paths[k].c_str(), GDAL_OF_RASTER));
-        if (!ds || !ds->GetSpatialRef()) {
-            throw InputError(paths[k] + ": has no CRS; a collection of DEMs needs one in each");
-        }
-        srs[k] = *ds->GetSpatialRef();
-    }
+                                                    const std::vector<DemInfo>& infos,
+                                                    const std::vector<OGRSpatialReference>& srs) {
     const auto same_grid = [&](std::size_t a, std::size_t b) {
         const auto& g = infos[a].geotransform;
         const auto& h = infos[b].geotransform;
@@ -1034,6 +1027,7 @@ std::shared_ptr<const DemSource> DemSource::open(const std::vector<std::string>&
     // Several files are read for their heights as their groups, not one by one (group_source).
     const bool one = paths.size() == 1;
     std::vector<DemInfo> infos;
+    std::vector<OGRSpatialReference> srs; // each file's CRS, for group_by_grid
     for (const auto& path : paths) {
         infos.push_back(one ? inspect_dem(path, kExactRangeSamples, nodata, range)
                             : inspect_metadata(path, nodata, range));
@@ -1047,6 +1041,7 @@ std::shared_ptr<const DemSource> DemSource::open(const std::vector<std::string>&
             throw InputError(path + ": not a raster GDAL can read (" + gdal_message() + ")");
         }
         check_band(path, *ds);
+        srs.push_back(ds->GetSpatialRef() ? *ds->GetSpatialRef() : OGRSpatialReference());
     }
     if (paths.size() == 1) {
         return std::make_shared<GdalDemSource>(paths[0], infos[0]);
@@ -1058,7 +1053,7 @@ std::shared_ptr<const DemSource> DemSource::open(const std::vector<std::string>&
         }
     }
     std::vector<std::shared_ptr<const DemSource>> members;
-    for (const auto& group : group_by_grid(paths, infos)) {
+    for (const auto& group : group_by_grid(paths, infos, srs)) {
         std::vector<std::string> files;
         std::vector<DemInfo> group_infos;
         for (std::size_t k : group) {
@@ -1070,15 +1065,7 @@ std::shared_ptr<const DemSource> DemSource::open(const std::vector<std::string>&
     if (members.size() == 1) {
         return members.front();
     }
-    if (priority == SourcePriority::Finest) {
-        // Source pixels per sample of one lattice: for lon/lat DEMs independent of latitude, so
-        // two of the same angular pixel size tie and keep the order given.
-        std::stable_sort(members.begin(), members.end(), [](const auto& a, const auto& b) {
-            return a->pixels_per_sample(Scheme::Geodetic, 10, 256) >
-                   b->pixels_per_sample(Scheme::Geodetic, 10, 256);
-        });
-    }
-    return make_collection_source(std::move(members));
+    return make_collection_source(std::move(members), priority);
 }
 
 void write_tile_raster_tiff(const TileRaster& raster, const std::string& path) {
