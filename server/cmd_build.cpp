@@ -279,6 +279,7 @@ int run(const Args& args) {
     o.resume = args.has("resume");
     o.force = args.has("force");
     o.finalize = args.has("finalize");
+    o.update = args.has("update");
 
     tiler::check_store_formats(o.output, o.formats); // a container holds one DEM encoding
 
@@ -291,7 +292,8 @@ int run(const Args& args) {
         "build: " + std::to_string(s.written) + " tiles written" +
         (s.dem_written ? " (" + std::to_string(s.dem_written) + " of them DEM tiles), " : ", ") +
         std::to_string(s.skipped) + " skipped (already there), " + std::to_string(s.empty) +
-        " empty, " + std::to_string(s.failed) + " failed, " + human_bytes(s.bytes) + ", " +
+        " empty, " + std::to_string(s.failed) + " failed, " +
+        (o.update ? std::to_string(s.removed) + " removed, " : "") + human_bytes(s.bytes) + ", " +
         seconds + " s" + (s.tileset_written ? "; tileset written" : ""));
     if (args.has("json")) {
         std::printf("%s\n", tiler::to_json(s).c_str());
@@ -367,6 +369,11 @@ const Command& build_command() {
              {"priority", "finest|listed", kPriorityHelp},
              {"threads", "N", "worker threads (default: one per usable core)"},
              {"resume", "", "continue a build: same parameters, tiles already there are kept"},
+             {"update",
+              "",
+              "after DEMs were added, replaced or removed: remake only the tiles they touch "
+              "(and their ancestors), remove those left without data; the result is what a "
+              "full build makes"},
              {"force", "", "delete the layer's existing tiles and documents first"},
              {"shard",
               "I/N",
@@ -380,7 +387,10 @@ const Command& build_command() {
          "flight and exits with 130/143; a second one stops at once. Without --resume or\n"
          "--force an existing layer in OUT is an error. Sharded builds: run every shard I/N\n"
          "against the same OUT (a shared directory, or one SQLite file on one machine), then\n"
-         "once 'terrabound build ... --finalize' with the same parameters. One build writes OUT\n"
+         "once 'terrabound build ... --finalize' with the same parameters. --update follows\n"
+         "changed DEMs (it works with --shard too: run every shard with --update, then\n"
+         "--finalize); an interrupted update is finished by running it again. One build writes "
+         "OUT\n"
          "at a time (the shards of one build together): another is refused at once, naming the\n"
          "holder's pid and host. The lock is OUT/.build.lock (OUT.sqlite.build.lock beside an\n"
          "SQLite file), gone once the build ends; a killed build's lock is taken over.\n"

@@ -419,6 +419,7 @@ public:
         return over_eps_;
     }
 
+    std::string zoom_signature(int z) const override { return plan_.zoom_signature(z); }
     double min_height() const override { return plan_.min_height(); }
     double max_height() const override { return plan_.max_height(); }
     VerticalDatum source_datum() const override { return plan_.datum(); }

@@ -81,6 +81,7 @@ public:
         return inner_->tile_error(tile);
     }
     std::size_t tiles_over_eps() const override { return inner_->tiles_over_eps(); }
+    std::string zoom_signature(int z) const override { return inner_->zoom_signature(z); }
     double min_height() const override { return inner_->min_height(); }
     double max_height() const override { return inner_->max_height(); }
     tiler::VerticalDatum source_datum() const override { return inner_->source_datum(); }

@@ -347,8 +347,8 @@ TEST_CASE("a build killed half way and resumed equals one clean run, byte for by
     // Without --resume the existing output is refused.
     const Run refused = run(args(dem, dir / "killed", deep), dir);
     CHECK(refused.code == 2);
-    CHECK(refused.err.find("use --resume to continue or --force to overwrite") !=
-          std::string::npos);
+    CHECK(refused.err.find("use --resume to continue, --update to follow changed DEMs, or "
+                           "--force to overwrite") != std::string::npos);
 
     const Run resumed =
         run(args(dem, dir / "killed", {"--max-zoom", "11", "--resume", "--json"}), dir);

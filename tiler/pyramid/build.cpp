@@ -14,6 +14,9 @@
 #include "tiler/log.hpp"
 #include "tiler/pyramid/hosting.hpp"
 #include "tiler/pyramid/tile_settings.hpp"
+#include "tiler/pyramid/update.hpp"
+#include "tiler/sources/lattice_raster.hpp"
+#include "tiler/stores/checksum.hpp"
 #include "tiler/stores/output_lock.hpp"
 #include "tiler/stores/store.hpp"
 
@@ -46,33 +49,6 @@ std::string shard_document(const ShardSpec& s) {
     return "build-shards/" + std::to_string(s.index) + "-of-" + std::to_string(s.count) + ".json";
 }
 
-// The build manifest: what decides the tiles' bytes (tiler/stores/manifest.hpp), then what
-// decides which tiles there are.
-Manifest make_manifest(const BuildOptions& o, const Layer& layer, int shard_count) {
-    Manifest m;
-    m.emplace_back("terrabound_build", "1");
-    for (auto& entry : tile_settings(layer)) {
-        m.push_back(std::move(entry));
-    }
-    if (o.bbox) {
-        m.emplace_back("bbox",
-                       "[" + json_number(o.bbox->west) + ", " + json_number(o.bbox->south) + ", " +
-                           json_number(o.bbox->east) + ", " + json_number(o.bbox->north) + "]");
-    } else {
-        m.emplace_back("bbox", "null");
-    }
-    std::string formats = "[";
-    for (std::size_t i = 0; i < o.formats.size(); ++i) {
-        formats += std::string(i ? ", " : "") + json_string(format_name(o.formats[i]));
-    }
-    m.emplace_back("formats", formats + "]");
-    if (std::find(o.formats.begin(), o.formats.end(), Format::Terrain) != o.formats.end()) {
-        m.emplace_back("terrain_extensions", terrain_extensions_json(o.terrain_extensions));
-    }
-    m.emplace_back("shard_count", std::to_string(shard_count));
-    return m;
-}
-
 // Throws InputError naming the first parameter that differs. shard_count is checked only
 // when `check_shards` (shards and --finalize must agree on N; an unsharded resume need not).
 void compare_manifests(const Manifest& was,
@@ -99,8 +75,31 @@ void compare_manifests(const Manifest& was,
 struct Made {
     TileId id;
     std::vector<std::pair<Format, std::string>> tiles;
-    bool dem = false; // a tile of the DEM pyramid
+    bool dem = false;            // a tile of the DEM pyramid
+    std::vector<Format> removed; // an update: formats the tile no longer has
 };
+
+// Removes a tile's `formats` and the documents that hang on it (the external tileset and the
+// 3D Tiles terrain subtree rooted at it, when there are).
+void remove_tile(TileStore& store,
+                 const std::string& name,
+                 const TileId& id,
+                 const std::vector<Format>& formats) {
+    for (Format f : formats) {
+        store.remove(TileKey{name, id, f, -1});
+        const std::string zxy =
+            std::to_string(id.z) + "/" + std::to_string(id.x) + "/" + std::to_string(id.y);
+        if (f == Format::Glb || f == Format::Drc) {
+            store.remove_document(name, "tilesets/" + zxy + ".json");
+        } else if (f == Format::Terrain3d && id.z % kTerrainSubtreeLevels == 0) {
+            const std::int64_t side = std::int64_t{1} << id.z;
+            store.remove_document(name,
+                                  "terrain/" + std::to_string(id.x / side) + "/" +
+                                      std::to_string(id.z) + "/" + std::to_string(id.x % side) +
+                                      "/" + std::to_string(id.y) + ".subtree");
+        }
+    }
+}
 
 // Leaves in made's .terrain tile only the quantized-mesh extensions in `mask`.
 void keep_terrain_extensions(Made& made, unsigned mask) {
@@ -165,6 +164,17 @@ struct Plan {
     std::int64_t mesh_total = 0; // tiles before this index are mesh tiles, the rest DEM tiles
 
     bool dem(std::int64_t i) const { return i >= mesh_total; }
+
+    // The ranges of the mesh pyramid, or of the DEM pyramid.
+    std::vector<TileRange> ranges_of(bool dem_pyramid) const {
+        std::vector<TileRange> out;
+        for (std::size_t k = 0; k < ranges.size(); ++k) {
+            if ((offsets[k] >= mesh_total) == dem_pyramid) {
+                out.push_back(ranges[k]);
+            }
+        }
+        return out;
+    }
 
     ValidTile at(std::int64_t i) const {
         const auto k = static_cast<std::size_t>(
@@ -365,6 +375,43 @@ Plan make_plan(const Layer& layer, const BuildOptions& o) {
         });
     }
     return plan;
+}
+
+// The build manifest: what decides the tiles' bytes (tiler/stores/manifest.hpp), then what
+// decides which tiles there are.
+Manifest
+make_manifest(const BuildOptions& o, const Layer& layer, const Plan& plan, int shard_count) {
+    Manifest m;
+    m.emplace_back("terrabound_build", "1");
+    for (auto& entry : tile_settings(layer)) {
+        m.push_back(std::move(entry));
+    }
+    if (o.bbox) {
+        m.emplace_back("bbox",
+                       "[" + json_number(o.bbox->west) + ", " + json_number(o.bbox->south) + ", " +
+                           json_number(o.bbox->east) + ", " + json_number(o.bbox->north) + "]");
+    } else {
+        m.emplace_back("bbox", "null");
+    }
+    std::string formats = "[";
+    for (std::size_t i = 0; i < o.formats.size(); ++i) {
+        formats += std::string(i ? ", " : "") + json_string(format_name(o.formats[i]));
+    }
+    m.emplace_back("formats", formats + "]");
+    if (std::find(o.formats.begin(), o.formats.end(), Format::Terrain) != o.formats.end()) {
+        m.emplace_back("terrain_extensions", terrain_extensions_json(o.terrain_extensions));
+    }
+    m.emplace_back("shard_count", std::to_string(shard_count));
+    // What an update compares (update.hpp).
+    m.emplace_back("source_bounds", source_bounds_entry(layer.options().sources));
+    m.emplace_back("source_grids", source_grids_entry(layer));
+    m.emplace_back("zooms", zooms_entry(layer, 0, layer.max_zoom()));
+    const bool dem = std::any_of(o.formats.begin(), o.formats.end(), is_dem_format);
+    const DemTilePlan d = dem_tile_plan(layer);
+    m.emplace_back("dem_zooms", dem ? dem_zooms_entry(layer, d.min_zoom, d.max_zoom) : "[]");
+    m.emplace_back("mesh_ranges", ranges_entry(plan.ranges_of(false)));
+    m.emplace_back("dem_ranges", ranges_entry(plan.ranges_of(true)));
+    return m;
 }
 
 // ---- progress ----
@@ -578,12 +625,18 @@ bool write_tileset(const Layer& layer, TileStore& store, const std::string& name
 struct ShardRecord {
     std::int64_t present = 0;
     std::int64_t empty = 0;
+    std::int64_t manifest = -1; // checksum of the build manifest the shard ran under
 };
 
-std::string shard_record_text(const ShardSpec& s, std::int64_t present, std::int64_t empty) {
+// `manifest`: the build manifest's text, so that a shard of an earlier build (before an
+// update) does not count as one of this build.
+std::string shard_record_text(const ShardSpec& s,
+                              std::int64_t present,
+                              std::int64_t empty,
+                              const std::string& manifest) {
     return "{\"shard\": " + std::to_string(s.index) + ", \"count\": " + std::to_string(s.count) +
            ", \"present\": " + std::to_string(present) + ", \"empty\": " + std::to_string(empty) +
-           "}\n";
+           ", \"manifest\": " + std::to_string(store_checksum(manifest)) + "}\n";
 }
 
 std::optional<ShardRecord> parse_shard_record(const std::string& text) {
@@ -602,10 +655,11 @@ std::optional<ShardRecord> parse_shard_record(const std::string& text) {
     };
     const auto present = field("present");
     const auto empty = field("empty");
-    if (!present || !empty) {
+    const auto manifest = field("manifest");
+    if (!present || !empty || !manifest) {
         return std::nullopt;
     }
-    return ShardRecord{*present, *empty};
+    return ShardRecord{*present, *empty, *manifest};
 }
 
 void check_options(const BuildOptions& o) {
@@ -649,41 +703,87 @@ void check_options(const BuildOptions& o) {
         throw InputError("build: --shard " + std::to_string(o.shard->index) + "/" +
                          std::to_string(o.shard->count) + ": expected I/N with 0 <= I < N");
     }
-    if (o.force && (o.resume || o.shard || o.finalize)) {
-        throw InputError("build: --force starts over and cannot go with --resume, --shard or "
-                         "--finalize (with shards, clear the output once, then start the shards)");
+    if (o.force && (o.resume || o.shard || o.finalize || o.update)) {
+        throw InputError("build: --force starts over and cannot go with --resume, --update, "
+                         "--shard or --finalize (with shards, clear the output once, then start "
+                         "the shards)");
+    }
+    if (o.update && is_single_file_store(o.output) && !o.output.ends_with(".sqlite") &&
+        !o.output.ends_with(".db")) {
+        throw InputError("build --update: " + o.output +
+                         " is written once and cannot be updated in place; update a directory "
+                         "or an .sqlite store and convert it, or rebuild with --force");
     }
     if (o.finalize && o.shard) {
         throw InputError("build: --finalize runs once after all shards; drop --shard");
     }
 }
 
+struct Prepared {
+    int shard_count = 1;
+    Manifest manifest;               // this run's
+    std::optional<Manifest> updated; // --update: the manifest of the build it updates
+};
+
+// --update: records the build being updated (unless an interrupted update already did), then
+// writes this run's manifest. `pending` is that record, when there is one.
+Manifest start_update(const BuildOptions& o,
+                      TileStore& store,
+                      const std::optional<std::string>& existing,
+                      const std::optional<std::string>& pending,
+                      const Manifest& manifest,
+                      const std::string& where) {
+    const std::string& name = o.layer.name;
+    if (!existing) {
+        throw InputError(where + ": nothing to update (no " + std::string(kBuildManifest) +
+                         "); build it once without --update");
+    }
+    const std::string text = manifest_text(manifest);
+    if (!pending && *existing != text) {
+        store.put_document(name, kUpdateRecord, *existing); // before any tile changes
+    }
+    store.put_document(name, kBuildManifest, text);
+    return parse_manifest(pending ? *pending : *existing);
+}
+
 // Checks the output against this run (--force: clears the layer) and writes the build manifest
-// when there is none yet. Returns the shard count (--finalize learns it from the manifest).
-// Runs inside the output lock's setup, so that shards starting together agree on one manifest.
-int prepare_output(const BuildOptions& o,
-                   const Layer& layer,
-                   TileStore& store,
-                   const std::string& where) {
+// when there is none yet (or, updating, this run's). --finalize learns the shard count from the
+// manifest. Runs inside the output lock's setup, so that shards starting together agree on one
+// manifest.
+Prepared prepare_output(const BuildOptions& o,
+                        const Layer& layer,
+                        const Plan& plan,
+                        TileStore& store,
+                        const std::string& where) {
     const std::string& name = o.layer.name;
     const auto existing = store.get_document(name, kBuildManifest);
-    int shard_count = o.shard ? o.shard->count : 1;
+    const auto pending = store.get_document(name, kUpdateRecord);
+    Prepared p;
+    p.shard_count = o.shard ? o.shard->count : 1;
     if (o.finalize && existing) {
         // --finalize learns N from the shards' manifest.
         const std::string n = manifest_value(parse_manifest(*existing), "shard_count");
-        const auto r = std::from_chars(n.data(), n.data() + n.size(), shard_count);
-        if (r.ec != std::errc() || shard_count < 1) {
+        const auto r = std::from_chars(n.data(), n.data() + n.size(), p.shard_count);
+        if (r.ec != std::errc() || p.shard_count < 1) {
             throw IoError(where + ": " + std::string(kBuildManifest) +
                           " has no valid shard_count; "
                           "it was not written by this terrabound; use --force to start over");
         }
     }
-    const Manifest manifest = make_manifest(o, layer, shard_count);
+    if (pending && !o.update && !o.force && !o.finalize) {
+        throw InputError(where + ": an update of it (build --update) was interrupted; finish it "
+                                 "by running that build again with --update");
+    }
+    p.manifest = make_manifest(o, layer, plan, p.shard_count);
+    const Manifest& manifest = p.manifest;
     if (o.force) {
         if (store.has_layer(name)) {
             log::info("build: --force: removing layer " + name + " from " + store.describe());
             store.remove_layer(name);
         }
+    } else if (o.update && !o.finalize) {
+        p.updated = start_update(o, store, existing, pending, manifest, where);
+        return p;
     } else if (o.resume || o.shard || o.finalize) {
         if (existing) {
             const Manifest was = parse_manifest(*existing);
@@ -698,12 +798,111 @@ int prepare_output(const BuildOptions& o,
         }
     } else if (store.has_layer(name)) {
         throw InputError(o.output + " exists (layer " + name +
-                         "); use --resume to continue or --force to overwrite");
+                         "); use --resume to continue, --update to follow changed DEMs, or "
+                         "--force to overwrite");
     }
     if (!existing || o.force) {
         store.put_document(name, kBuildManifest, manifest_text(manifest));
     }
-    return shard_count;
+    return p;
+}
+
+// An update's tiles in both pyramids (tiler/pyramid/update.hpp).
+struct Update {
+    UpdateScope scope;
+    UpdateTiles mesh, dem;
+    bool touches(const TileId& id, bool dem_tile) const {
+        return (dem_tile ? dem : mesh).contains(id);
+    }
+};
+
+std::string changes_text(const std::vector<std::string>& changes) {
+    if (changes.empty()) {
+        return "no DEM changed";
+    }
+    std::string out;
+    for (std::size_t i = 0; i < changes.size() && i < 3; ++i) {
+        out += (i ? ", " : "") + changes[i];
+    }
+    return changes.size() > 3 ? out + " and " + std::to_string(changes.size() - 3) + " more" : out;
+}
+
+std::string zooms_text(const std::vector<int>& zooms) {
+    std::string out;
+    for (int z : zooms) {
+        out += (out.empty() ? "" : ",") + std::to_string(z);
+    }
+    return out;
+}
+
+Update plan_update(const Manifest& was, const Manifest& now, const Layer& layer, const Plan& plan) {
+    UpdateScope scope = update_scope(was, now);
+    // What a tile reads beyond its edges, in tiles: the void filling's margin (in lattice
+    // samples, pixels no coarser than those at pixel zooms; in a DEM tile's pixels), and a
+    // quarter of a tile at least.
+    const double mesh_around =
+        std::max(0.25, (kLatticeFillMargin + 2.0) / layer.options().tile_size);
+    const double dem_around =
+        std::max(0.25, (kDemFillMargin + 2.0) / dem_tile_plan(layer).tile_size);
+    Update u{scope,
+             UpdateTiles(scope,
+                         layer.options().scheme,
+                         parse_ranges(manifest_value(was, "mesh_ranges"), "mesh_ranges"),
+                         plan.ranges_of(false),
+                         scope.zooms,
+                         mesh_around),
+             UpdateTiles(scope,
+                         Scheme::Mercator,
+                         parse_ranges(manifest_value(was, "dem_ranges"), "dem_ranges"),
+                         plan.ranges_of(true),
+                         scope.dem_zooms,
+                         dem_around)};
+    if (!scope.everything.empty()) {
+        log::warn("build --update: " + scope.everything + "; every tile is made again");
+    }
+    std::string zooms;
+    if (!scope.zooms.empty() || !scope.dem_zooms.empty()) {
+        zooms = " (whole zooms: " + zooms_text(scope.zooms) +
+                (scope.dem_zooms.empty() ? "" : "; DEM tiles " + zooms_text(scope.dem_zooms)) + ")";
+    }
+    log::info("build --update: " + changes_text(scope.changes) + "; remaking " +
+              std::to_string(u.mesh.remade() + u.dem.remade()) + " tiles" + zooms + ", removing " +
+              std::to_string(u.mesh.left_out().size() + u.dem.left_out().size()) +
+              " that no longer hold data");
+    return u;
+}
+
+// Removes the tiles of `ids` that `mine` owns, in every format of their pyramid. Returns how
+// many tiles it removed.
+std::int64_t remove_left_out(TileStore& store,
+                             const BuildOptions& o,
+                             const std::vector<TileId>& ids,
+                             bool dem,
+                             const std::function<bool(const TileId&)>& mine) {
+    std::vector<Format> formats;
+    for (Format f : o.formats) {
+        if (is_dem_format(f) == dem) {
+            formats.push_back(f);
+        }
+    }
+    std::int64_t removed = 0;
+    for (const TileId& id : ids) {
+        if (mine(id) && !formats.empty()) {
+            remove_tile(store, o.layer.name, id, formats);
+            ++removed;
+        }
+    }
+    return removed;
+}
+
+// Ends an update once its documents are in: the record of the build it updated goes.
+void finish_update(TileStore& store, const std::string& name) {
+    if (store.get_document(name, kUpdateRecord)) {
+        store.remove_document(name, kUpdateRecord);
+        log::info("build --update: done; " + store.describe() +
+                  " now holds what a full build "
+                  "of these DEMs makes");
+    }
 }
 
 // This run as the lock file shows it to a refused one.
@@ -716,6 +915,8 @@ std::string lock_command(const BuildOptions& o) {
         command += " --force";
     } else if (o.finalize) {
         command += " --finalize";
+    } else if (o.update) {
+        command += " --update";
     } else if (o.resume) {
         command += " --resume";
     }
@@ -782,8 +983,8 @@ std::string to_json(const BuildSummary& s) {
            ",\"written\":" + std::to_string(s.written) +
            ",\"dem_written\":" + std::to_string(s.dem_written) +
            ",\"skipped\":" + std::to_string(s.skipped) + ",\"empty\":" + std::to_string(s.empty) +
-           ",\"failed\":" + std::to_string(s.failed) + ",\"bytes\":" + std::to_string(s.bytes) +
-           ",\"seconds\":" + json_number(s.seconds) +
+           ",\"failed\":" + std::to_string(s.failed) + ",\"removed\":" + std::to_string(s.removed) +
+           ",\"bytes\":" + std::to_string(s.bytes) + ",\"seconds\":" + json_number(s.seconds) +
            ",\"interrupted\":" + (s.interrupted ? "true" : "false") +
            ",\"tileset_written\":" + (s.tileset_written ? "true" : "false") +
            ",\"tiles_over_eps\":" + std::to_string(s.over_eps) + "}";
@@ -805,16 +1006,20 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
     auto store = TileStore::open(o.output);
     const std::string where = o.output + " (layer " + name + ")";
 
-    int shard_count = 1;
-    output_lock.setup([&] { shard_count = prepare_output(o, *layer, *store, where); });
-
     const Plan plan = make_plan(*layer, o);
+    Prepared prepared;
+    output_lock.setup([&] { prepared = prepare_output(o, *layer, plan, *store, where); });
+    const int shard_count = prepared.shard_count;
+    const std::optional<Update> update =
+        prepared.updated
+            ? std::optional<Update>(plan_update(*prepared.updated, prepared.manifest, *layer, plan))
+            : std::nullopt;
     // The 3D Tiles tileset lists glb (or drc) tiles; terrain tiles have their layer.json.
     const bool mesh_formats = std::any_of(o.formats.begin(), o.formats.end(), [](Format f) {
         return f == Format::Glb || f == Format::Drc;
     });
     const bool terrain = wants_terrain(*layer, o);
-    const bool check_present = o.resume || o.shard || o.finalize;
+    const bool check_present = o.resume || o.shard || o.finalize || o.update;
     BuildSummary summary;
 
     if (o.finalize) {
@@ -824,7 +1029,7 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
             const ShardSpec s{i, shard_count};
             const auto text = store->get_document(name, shard_document(s));
             const auto record = text ? parse_shard_record(*text) : std::nullopt;
-            if (!record) {
+            if (!record || record->manifest != store_checksum(manifest_text(prepared.manifest))) {
                 throw InputError(where + ": shard " + std::to_string(i) + "/" +
                                  std::to_string(shard_count) + " has not finished (no " +
                                  shard_document(s) + "); run it again with --shard " +
@@ -851,6 +1056,7 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
                                   "every shard reported (see the warning above); run each shard "
                                   "again with --resume");
         }
+        finish_update(*store, name);
         store->finish();
         log::info("build: finalized " + std::to_string(shard_count) + " shard(s), " +
                   std::to_string(reported) + " tiles");
@@ -901,11 +1107,22 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
                 if (!mine(id)) {
                     continue;
                 }
+                // An update remakes the tiles it touches whether present or not.
+                const bool remake = update && update->touches(id, dem);
+                Made made{id, {}, dem, {}};
                 if (!dem && !layer->may_have_tile(tile) && !wants_terrain(*layer, o)) {
                     ++counters.empty;
+                    if (remake) {
+                        for (Format f : o.formats) {
+                            if (!is_dem_format(f)) {
+                                made.removed.push_back(f);
+                            }
+                        }
+                        queue.push(std::move(made));
+                    }
                     continue;
                 }
-                if (check_present) {
+                if (check_present && !remake) {
                     bool all = true;
                     for (Format f : o.formats) {
                         if (is_dem_format(f) == dem && makes(*layer, f, tile)) {
@@ -917,7 +1134,6 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
                         continue;
                     }
                 }
-                Made made{id, {}, dem};
                 try {
                     std::vector<Format> formats;
                     for (Format f : o.formats) {
@@ -938,8 +1154,22 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
                         made.tiles = layer->make_tiles(tile, formats);
                         keep_terrain_extensions(made, o.terrain_extensions);
                     }
+                    if (remake) {
+                        for (Format f : o.formats) {
+                            const bool has =
+                                std::any_of(made.tiles.begin(),
+                                            made.tiles.end(),
+                                            [f](const auto& t) { return t.first == f; });
+                            if (is_dem_format(f) == dem && !has) {
+                                made.removed.push_back(f);
+                            }
+                        }
+                    }
                     if (made.tiles.empty()) {
                         ++counters.empty;
+                        if (!made.removed.empty()) {
+                            queue.push(std::move(made));
+                        }
                         continue;
                     }
                 } catch (const IoError&) {
@@ -995,28 +1225,34 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
         batch_tiles = 0;
         last_flush = Clock::now();
     };
+    // A made tile joins the batch; an update's removals happen at once (each is atomic).
+    const auto take = [&](Made& m) {
+        if (!m.removed.empty()) {
+            remove_tile(*store, name, m.id, m.removed);
+            summary.removed += m.tiles.empty() ? 1 : 0;
+        }
+        if (m.tiles.empty()) {
+            return; // counted as empty by its worker
+        }
+        for (auto& [f, bytes] : m.tiles) {
+            batch.push_back({TileKey{name, m.id, f, -1}, std::move(bytes)});
+        }
+        ++batch_tiles;
+        batch_dem_tiles += m.dem ? 1 : 0;
+        ++counters.made;
+    };
     try {
         for (;;) {
             auto made = queue.pop(std::chrono::milliseconds(50));
             if (made) {
-                for (auto& [f, bytes] : made->tiles) {
-                    batch.push_back({TileKey{name, made->id, f, -1}, std::move(bytes)});
-                }
-                ++batch_tiles;
-                batch_dem_tiles += made->dem ? 1 : 0;
-                ++counters.made;
+                take(*made);
             } else if (running.load() == 0) {
                 // Workers are gone and nothing came within the wait: the queue is drained
                 // (a worker's last push happens before it counts itself out).
                 if (!(made = queue.pop(std::chrono::milliseconds(0)))) {
                     break;
                 }
-                for (auto& [f, bytes] : made->tiles) {
-                    batch.push_back({TileKey{name, made->id, f, -1}, std::move(bytes)});
-                }
-                ++batch_tiles;
-                batch_dem_tiles += made->dem ? 1 : 0;
-                ++counters.made;
+                take(*made);
             }
             const double since = std::chrono::duration<double>(Clock::now() - last_flush).count();
             if (batch_tiles >= static_cast<std::int64_t>(kBatchTiles) ||
@@ -1050,11 +1286,17 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
     summary.interrupted = stop.load() && done < summary.planned;
 
     if (!summary.interrupted && summary.failed == 0) {
+        if (update) {
+            summary.removed += remove_left_out(*store, o, update->mesh.left_out(), false, mine);
+            summary.removed += remove_left_out(*store, o, update->dem.left_out(), true, mine);
+        }
         if (o.shard) {
-            store->put_document(
-                name,
-                shard_document(*o.shard),
-                shard_record_text(*o.shard, summary.written + summary.skipped, summary.empty));
+            store->put_document(name,
+                                shard_document(*o.shard),
+                                shard_record_text(*o.shard,
+                                                  summary.written + summary.skipped,
+                                                  summary.empty,
+                                                  manifest_text(prepared.manifest)));
         } else {
             store->clean_up(name);
             // A build of DEM tiles alone has no mesh tiles for a tileset to list.
@@ -1067,6 +1309,9 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
                 write_terrain_tileset(*layer, *store, name);
             }
             write_static_hosting(o, *layer, *store, name);
+            if (summary.tileset_written || !mesh_formats) {
+                finish_update(*store, name);
+            }
             store->finish();
         }
     }

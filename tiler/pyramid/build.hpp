@@ -9,8 +9,11 @@
 //   1. the manifest document "build-manifest.json" (everything that decides the tiles' bytes);
 //   2. tiles, each write atomic (directory: temp + fsync + rename; SQLite: batched transactions);
 //   3. unsharded: the layer's tileset documents, "tileset.json" last, so a tileset never points
-//      at a missing tile. A shard I of N instead writes "build-shards/I-of-N.json" when all its
-//      tiles are in, and `--finalize` writes the tileset once every shard has reported.
+//      at a missing tile. An update (--update) writes "build-update.json" (the last build's
+//      manifest) before step 1 and removes it after step 3, so an interrupted update is
+//      finished by running it again (tiler/pyramid/update.hpp). A shard I of N instead writes
+//      "build-shards/I-of-N.json" when all its tiles are in, and `--finalize` writes the tileset
+//      once every shard has reported.
 // Tiles are enumerated in a fixed order (zoom ascending, then row-major y, x) and each tile's
 // bytes depend on the tile alone, so the output is the same whatever the thread count.
 #include "tiler/formats/format.hpp"
@@ -62,10 +65,14 @@ struct BuildOptions {
     // Where the output will be hosted ("https://example.com/tiles"), for the absolute tile URLs
     // of the raster DEM TileJSON; empty: URLs relative to the TileJSON.
     std::string base_url;
-    int threads = 0;                // worker threads; 0 = one per core
-    bool resume = false;            // continue a build: same manifest, present tiles skipped
-    bool force = false;             // delete the layer's existing tiles and documents first
-    bool finalize = false;          // after all shards: verify and write the tileset
+    int threads = 0;       // worker threads; 0 = one per core
+    bool resume = false;   // continue a build: same manifest, present tiles skipped
+    bool force = false;    // delete the layer's existing tiles and documents first
+    bool finalize = false; // after all shards: verify and write the tileset
+    // Remake only the tiles a change of the DEMs since the last build touches, and remove the
+    // ones it leaves without data (tiler/pyramid/update.hpp); the result is the store a full
+    // build would make. Implies resume (missing tiles are made too); works with --shard.
+    bool update = false;
     std::optional<ShardSpec> shard; // build only this shard's tiles (implies resume)
     ProgressMode progress = ProgressMode::Auto;
 };
@@ -76,6 +83,7 @@ struct BuildSummary {
     std::int64_t skipped = 0; // already in the store (resume)
     std::int64_t empty = 0;   // no data there (NotFound): nothing written
     std::int64_t failed = 0;  // make_tile threw anything else: logged, nothing written
+    std::int64_t removed = 0; // tiles an update removed (no data there any more)
     std::int64_t bytes = 0;   // bytes of tiles written now
     double seconds = 0;
     bool interrupted = false; // stopped by the stop flag (SIGINT/SIGTERM)

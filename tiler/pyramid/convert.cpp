@@ -233,11 +233,13 @@ container_documents(const SqliteDb& db, const std::string& input, const Choice& 
                          input + " --resume (or --finalize after shards), then convert");
     }
     // As a build of this encoding alone records it: one format, no terrain extensions, no
-    // shards; everything that decides the tiles' bytes as it was.
+    // shards, no mesh tiles; everything that decides the tiles' bytes as it was.
     Manifest alone;
     for (auto& [key, value] : manifest) {
         if (key == "formats") {
             value = "[" + json_string(format) + "]";
+        } else if (key == "mesh_ranges") {
+            value = "[]";
         } else if (key == "shard_count") {
             value = "1";
         } else if (key == "terrain_extensions") {

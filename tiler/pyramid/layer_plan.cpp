@@ -4,6 +4,7 @@
 
 #include "core/error.hpp"
 #include "tiler/formats/terrain_tiles.hpp"
+#include "tiler/json_number.hpp"
 #include "tiler/log.hpp"
 #include "tiler/mesh/pixel_tile.hpp"
 #include "tiler/sources/geoid.hpp"
@@ -104,6 +105,31 @@ double LayerPlan::eps_for_zoom(int z) const {
 double LayerPlan::terrain_eps_for_zoom(int z) const {
     const double share = z < max_zoom_ ? kTerrainCoarseShare : kTerrainLevelShare;
     return std::max(eps_for_zoom(z), kCesiumLevelError / std::exp2(z) * share);
+}
+
+std::string LayerPlan::zoom_signature(int z) const {
+    const auto budget = [](const ErrorBudget& b) {
+        return "[" + json_number(b.mesh_eps) + ", " + json_number(b.drawn_bound) + ", " +
+               json_number(b.max_edge) + ", " + json_number(b.max_edge_m) + ", " +
+               json_number(b.quant_step) + "]";
+    };
+    const ZoomSource from = zoom_source(z);
+    std::string out = "[" + std::to_string(z) + ", \"" + to_string(from) + "\", " +
+                      json_number(eps_for_zoom(z)) + ", " + budget(budget_at(z, eps_for_zoom(z))) +
+                      ", " + json_number(terrain_eps_for_zoom(z)) + ", " +
+                      budget(terrain_budget_at(z, terrain_eps_for_zoom(z)));
+    // Blocks of pixels (summary blocks, decimated reads) are cut from a grid's origin, which
+    // moves when a mosaic grows west or north (its extent is compared apart: update.hpp).
+    const ReadLevel level = source_.read_level(options_.scheme, z, options_.tile_size);
+    if (from == ZoomSource::Summary ||
+        (from == ZoomSource::Lattice && (level.step > 1 || level.overview >= 0))) {
+        for (const DemInfo* part : source_.parts()) {
+            const auto& g = part->geotransform;
+            out += ", [" + json_number(g[0]) + ", " + json_number(g[3]) + ", " + json_number(g[1]) +
+                   ", " + json_number(g[5]) + "]";
+        }
+    }
+    return out + "]";
 }
 
 ZoomSource LayerPlan::zoom_source(int z) const {

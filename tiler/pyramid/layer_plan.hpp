@@ -65,6 +65,9 @@ public:
     ErrorBudget terrain_budget_at(int z, double eps) const;
     ErrorBudget budget_with(int z, double eps, double sag_share) const;
 
+    // Layer::zoom_signature.
+    std::string zoom_signature(int z) const;
+
     // The largest vertical distance between the geoid and any height of the DEM.
     double relief() const;
 

@@ -55,6 +55,19 @@ std::unique_ptr<TileStore> TileStore::open(const std::string& path) {
     return open_directory_store(path);
 }
 
+void TileStore::remove(const TileKey& key) {
+    (void)key;
+    throw InputError(describe() + ": tiles cannot be removed from it (it is written once); "
+                                  "rebuild it with --force, or update a directory or an .sqlite "
+                                  "file and convert that");
+}
+
+void TileStore::remove_document(const std::string& layer, const std::string& name) {
+    (void)layer;
+    throw InputError(describe() + ": document " + name +
+                     " cannot be removed from it (it is written once); rebuild it with --force");
+}
+
 bool is_single_file_store(const std::string& path) {
     for (const char* suffix : {".sqlite", ".db", ".mbtiles", ".pmtiles"}) {
         if (ends_with(path, suffix)) {

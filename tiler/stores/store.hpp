@@ -63,6 +63,12 @@ public:
     virtual void
     put_document(const std::string& layer, const std::string& name, std::string_view bytes) = 0;
 
+    // Remove one tile, or one document, when present (`build --update` drops what a change of
+    // sources leaves without data); each removal is atomic. The directory and SQLite stores do;
+    // the containers written once (MBTiles, PMTiles) throw InputError.
+    virtual void remove(const TileKey& key);
+    virtual void remove_document(const std::string& layer, const std::string& name);
+
     // True when the store holds any tile or document of `layer`.
     virtual bool has_layer(const std::string& layer) const = 0;
     // Deletes every tile and document of `layer` (the builder's --force).

@@ -190,6 +190,30 @@ void write_verified(const std::string& root, const StorePath& path, std::string_
     write_in(dir, path.name, path.shown, bytes);
 }
 
+// Removes a file and then its checksum sidecar (a sidecar alone reads as a missing file); a
+// file already absent is no error.
+void remove_verified(const std::string& root, const StorePath& path) {
+    const Fd dir = open_dirs(root, path, false);
+    if (dir.fd < 0) {
+        return;
+    }
+    for (const std::string& name : {path.name, sidecar_name(path.name)}) {
+        if (::unlinkat(dir.fd, name.c_str(), 0) != 0 && errno != ENOENT) {
+            fail(path.shown, "remove", errno);
+        }
+    }
+    // Directories left empty go too (never the layer's own), as a build would not make them.
+    for (std::size_t k = path.dirs.size(); k-- > 1;) {
+        std::string dir_path = root;
+        for (std::size_t i = 0; i <= k; ++i) {
+            dir_path += "/" + path.dirs[i];
+        }
+        if (::rmdir(dir_path.c_str()) != 0) {
+            break; // not empty (or already gone): the ones above are not either
+        }
+    }
+}
+
 // The whole file `name` in `dir`, or nullopt when it is absent or a symbolic link (logged).
 std::optional<std::string>
 read_in(const Fd& dir, const std::string& name, const std::string& shown) {
@@ -309,6 +333,12 @@ public:
                       const std::string& name,
                       std::string_view bytes) override {
         write_verified(root_, document_path(layer, name), bytes);
+    }
+
+    void remove(const TileKey& key) override { remove_verified(root_, tile_path(key)); }
+
+    void remove_document(const std::string& layer, const std::string& name) override {
+        remove_verified(root_, document_path(layer, name));
     }
 
     bool has_layer(const std::string& layer) const override {

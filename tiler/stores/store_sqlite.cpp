@@ -163,6 +163,25 @@ public:
         step(put_doc_.get(), "write a document");
     }
 
+    void remove(const TileKey& key) override {
+        validate_key(key);
+        std::lock_guard lock(mutex_);
+        Stmt s = prepare("DELETE FROM tiles WHERE layer=?1 AND format=?2 AND eps_level=?3"
+                         " AND z=?4 AND x=?5 AND y=?6");
+        bind_key(s.get(), key);
+        step(s.get(), "remove a tile");
+    }
+
+    void remove_document(const std::string& layer, const std::string& name) override {
+        validate_layer_name(layer);
+        validate_document_name(name);
+        std::lock_guard lock(mutex_);
+        Stmt s = prepare("DELETE FROM documents WHERE layer=?1 AND name=?2");
+        bind_text(s.get(), 1, layer);
+        bind_text(s.get(), 2, name);
+        step(s.get(), "remove a document");
+    }
+
     bool has_layer(const std::string& layer) const override {
         validate_layer_name(layer);
         std::lock_guard lock(mutex_);

@@ -1,0 +1,307 @@
+// build --update: after DEMs are added, replaced or removed, the store equals a full build of
+// the new DEMs byte for byte (directory and SQLite, sharded or not), with fewer tiles made.
+#include "core/error.hpp"
+#include "tests/tiler/test_raster_util.hpp"
+#include "tiler/pyramid/build.hpp"
+#include "tiler/pyramid/update.hpp"
+#include "tiler/stores/manifest.hpp"
+
+#include <doctest/doctest.h>
+#include <sqlite3.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <functional>
+#include <map>
+
+using namespace tb::tiler;
+using namespace tb_test;
+
+namespace {
+
+// A geographic Float32 DEM of w x h pixels of `step` degrees from (west, north): hills whose
+// shape `seed` varies, and a void in its south-west corner.
+std::string write_dem(
+    const std::string& path, double west, double north, int w, int h, double step, double seed) {
+    Fixture f;
+    f.width = w, f.height = h;
+    f.geotransform = std::array<double, 6>{west, step, 0, north, 0, -step};
+    f.epsg = 4326;
+    f.nodata = -9999;
+    for (int r = 0; r < h; ++r) {
+        for (int c = 0; c < w; ++c) {
+            const double x = west + c * step, y = north - r * step;
+            double v = 900 + 400 * std::sin(7 * x + seed) * std::cos(5 * y - seed) +
+                       120 * std::sin(31 * x * y + 2 * seed);
+            if (c < w / 8 && r > h - h / 8) {
+                v = -9999;
+            }
+            f.values.push_back(v);
+        }
+    }
+    return write_fixture(path, f);
+}
+
+// Two overlapping DEMs of one grid in a scratch directory, and where their build goes.
+struct TwoDems {
+    ScratchDir dir;
+    std::string a = write_dem(dir.file("a.tif"), 8.0, 47.0, 193, 193, 0.8 / 192, 0);
+    std::string b = write_dem(dir.file("b.tif"), 8.6, 46.7, 97, 49, 0.8 / 192, 1);
+    std::string out = dir.file("out");
+};
+
+BuildOptions options(const std::vector<std::string>& dems, const std::string& out) {
+    BuildOptions o;
+    o.layer.sources = dems;
+    o.layer.tile_size = 32;
+    o.layer.summary_dir = "off";
+    o.output = out;
+    o.formats = {Format::Glb, Format::Drc, Format::Terrain, Format::Terrain3d, Format::Terrarium};
+    o.threads = 2;
+    o.progress = ProgressMode::Off;
+    return o;
+}
+
+// Runs `o` as `terrabound build` does, in a process of its own: each build opens the DEMs
+// afresh, as users run it (a DEM replaced in place is read anew). InputError with the
+// command's message when it fails.
+BuildSummary build(BuildOptions o, bool update = false) {
+    o.update = o.update || update;
+    std::string command = std::string(TB_BINARY) + " build";
+    for (const auto& dem : o.layer.sources) {
+        command += " " + dem;
+    }
+    command += " -o " + o.output + " --layer terrain --size 32 --summary-dir off --threads 2 " +
+               "--json --formats ";
+    for (std::size_t i = 0; i < o.formats.size(); ++i) {
+        command += (i ? "," : "") + std::string(format_name(o.formats[i]));
+    }
+    command += o.update ? " --update" : "";
+    command += o.resume ? " --resume" : "";
+    command += o.force ? " --force" : "";
+    command += o.finalize ? " --finalize" : "";
+    if (o.shard) {
+        command +=
+            " --shard " + std::to_string(o.shard->index) + "/" + std::to_string(o.shard->count);
+    }
+    const std::string out = o.output + ".stdout", err = o.output + ".stderr";
+    const int status = std::system((command + " >" + out + " 2>" + err).c_str());
+    const std::string json_line = slurp(out), messages = slurp(err);
+    fs::remove(out);
+    fs::remove(err);
+    if (status != 0) {
+        throw tb::InputError(messages);
+    }
+    const auto number = [&](const std::string& key) {
+        const auto at = json_line.find("\"" + key + "\":");
+        REQUIRE(at != std::string::npos);
+        return std::atoll(json_line.c_str() + at + key.size() + 3);
+    };
+    BuildSummary s;
+    s.written = number("written");
+    s.removed = number("removed");
+    s.failed = number("failed");
+    s.tileset_written = json_line.find("\"tileset_written\":true") != std::string::npos;
+    return s;
+}
+
+// Every file under a directory store, or every tile and document of an SQLite one.
+std::map<std::string, std::string> contents(const std::string& out) {
+    std::map<std::string, std::string> all;
+    if (!out.ends_with(".sqlite")) {
+        for (const auto& e : fs::recursive_directory_iterator(out)) {
+            if (e.is_regular_file()) {
+                all[fs::relative(e.path(), out).string()] = slurp(e.path());
+            }
+        }
+        return all;
+    }
+    sqlite3* db = nullptr;
+    REQUIRE(sqlite3_open_v2(out.c_str(), &db, SQLITE_OPEN_READONLY, nullptr) == SQLITE_OK);
+    for (const char* sql : {"SELECT layer || '/' || format || '/' || eps_level || '/' || z || '/' "
+                            "|| x || '/' || y, data FROM tiles",
+                            "SELECT layer || '/' || name, data FROM documents"}) {
+        sqlite3_stmt* s = nullptr;
+        REQUIRE(sqlite3_prepare_v2(db, sql, -1, &s, nullptr) == SQLITE_OK);
+        while (sqlite3_step(s) == SQLITE_ROW) {
+            all[reinterpret_cast<const char*>(sqlite3_column_text(s, 0))] =
+                std::string(static_cast<const char*>(sqlite3_column_blob(s, 1)),
+                            static_cast<std::size_t>(sqlite3_column_bytes(s, 1)));
+        }
+        sqlite3_finalize(s);
+    }
+    sqlite3_close(db);
+    return all;
+}
+
+// Checks that `out` holds exactly what a full build of `dems` into `fresh` holds.
+// `full` makes the reference build into `fresh` (by default one unsharded build of `dems`).
+void check_same_as_full(
+    const std::vector<std::string>& dems,
+    const std::string& out,
+    const std::string& fresh,
+    const BuildSummary& updated,
+    bool fewer = true,
+    const std::function<BuildSummary(const std::string&)>& make_full = nullptr) {
+    const BuildSummary full = make_full ? make_full(fresh) : build(options(dems, fresh));
+    const auto a = contents(out), b = contents(fresh);
+    CHECK(a.size() == b.size());
+    for (const auto& [name, bytes] : b) {
+        CAPTURE(name);
+        const auto it = a.find(name);
+        REQUIRE(it != a.end());
+        CHECK(it->second == bytes);
+    }
+    CHECK(updated.failed == 0);
+    CHECK(updated.tileset_written);
+    // The update made fewer tiles than the full build (unless every tile changed).
+    CHECK((updated.written < full.written || !fewer));
+    fs::remove_all(fresh);
+    fs::remove(fresh);
+}
+
+void touch_later(const std::string& path) {
+    fs::last_write_time(path, fs::last_write_time(path) + std::chrono::seconds(5));
+}
+
+} // namespace
+
+TEST_CASE("build --update after a DEM is added, replaced or removed equals a full build, byte "
+          "for byte, in a directory and in SQLite") {
+    ScratchDir dir;
+    // A 0.8 degree cell, a block on its grid at its east edge (a mosaic that grows), and a
+    // finer block inside it (a collection of two resolutions).
+    const std::string a = write_dem(dir.file("a.tif"), 8.0, 47.0, 193, 193, 0.8 / 192, 0);
+    const std::string b = write_dem(dir.file("b.tif"), 8.6, 46.7, 97, 49, 0.8 / 192, 1);
+    const std::string c = write_dem(dir.file("c.tif"), 8.2, 46.5, 97, 97, 0.1 / 96, 2);
+    for (const std::string ext : {"", ".sqlite"}) {
+        CAPTURE(ext);
+        const std::string out = dir.file("out" + ext), fresh = dir.file("fresh" + ext);
+        build(options({a}, out));
+        INFO("added b");
+        check_same_as_full({a, b}, out, fresh, build(options({a, b}, out), true));
+        INFO("added c");
+        // One pixel grid becomes a collection of two: every zoom is read another way.
+        check_same_as_full({a, b, c}, out, fresh, build(options({a, b, c}, out), true), false);
+        // Replaced in place: new heights, a later mtime.
+        write_dem(b, 8.6, 46.7, 97, 49, 0.8 / 192, 5);
+        touch_later(b);
+        INFO("replaced b");
+        check_same_as_full({a, b, c}, out, fresh, build(options({a, b, c}, out), true));
+        INFO("removed b");
+        const BuildSummary removed = build(options({a, c}, out), true);
+        CHECK(removed.removed > 0); // the tiles east of a held b's data alone
+        check_same_as_full({a, c}, out, fresh, removed);
+        const auto store = TileStore::open(out);
+        CHECK_FALSE(store->get_document("terrain", kUpdateRecord));
+    }
+}
+
+TEST_CASE("an interrupted update is finished by running it again; --resume alone is refused "
+          "while it is pending") {
+    const TwoDems two;
+    const std::string &a = two.a, &b = two.b, &out = two.out;
+    const ScratchDir& dir = two.dir;
+    build(options({a}, out));
+    BuildOptions o = options({a, b}, out);
+    o.update = true;
+    const std::atomic<bool> stop{true}; // stops before the first tile
+    CHECK(build_pyramid(o, stop).interrupted);
+    CHECK(TileStore::open(out)->get_document("terrain", kUpdateRecord));
+    BuildOptions resume = options({a, b}, out);
+    resume.resume = true;
+    CHECK_THROWS_WITH_AS(build(resume),
+                         doctest::Contains("an update of it (build --update) was interrupted"),
+                         tb::InputError);
+    check_same_as_full({a, b}, out, dir.file("fresh"), build(options({a, b}, out), true));
+}
+
+TEST_CASE("a sharded update and --finalize equal a sharded full build; the earlier build's "
+          "shard records do not count") {
+    const TwoDems two;
+    const std::string &a = two.a, &b = two.b, &out = two.out;
+    const ScratchDir& dir = two.dir;
+    const auto shard =
+        [](const std::vector<std::string>& dems, const std::string& to, int i, bool update) {
+            BuildOptions o = options(dems, to);
+            o.shard = ShardSpec{i, 2};
+            return build(o, update);
+        };
+    const auto finalize = [](const std::vector<std::string>& dems, const std::string& to) {
+        BuildOptions o = options(dems, to);
+        o.finalize = true;
+        return build(o);
+    };
+    shard({a}, out, 0, false);
+    shard({a}, out, 1, false);
+    finalize({a}, out);
+    BuildSummary total = shard({a, b}, out, 0, true);
+    // Shard 1 reported for the build before the update, not for this one.
+    CHECK_THROWS_WITH_AS(
+        finalize({a, b}, out), doctest::Contains("shard 1/2 has not finished"), tb::InputError);
+    const BuildSummary second = shard({a, b}, out, 1, true);
+    total.written += second.written;
+    total.tileset_written = finalize({a, b}, out).tileset_written;
+    check_same_as_full({a, b}, out, dir.file("fresh"), total, true, [&](const std::string& to) {
+        BuildSummary full = shard({a, b}, to, 0, false);
+        full.written += shard({a, b}, to, 1, false).written;
+        finalize({a, b}, to);
+        return full;
+    });
+}
+
+TEST_CASE("--update refuses what it cannot update, naming the way out") {
+    ScratchDir dir;
+    const std::string a = write_dem(dir.file("a.tif"), 8.0, 47.0, 193, 193, 0.8 / 192, 0);
+    CHECK_THROWS_WITH_AS(build(options({a}, dir.file("none")), true),
+                         doctest::Contains("nothing to update"),
+                         tb::InputError);
+    BuildOptions o = options({a}, dir.file("out"));
+    o.force = true;
+    CHECK_THROWS_WITH_AS(build(o, true), doctest::Contains("--force starts over"), tb::InputError);
+    o = options({a}, dir.file("dem.mbtiles"));
+    o.formats = {Format::Terrarium};
+    build(o);
+    CHECK_THROWS_WITH_AS(
+        build(o, true), doctest::Contains("cannot be updated in place"), tb::InputError);
+}
+
+TEST_CASE("an update touches the tiles meeting a changed DEM, their ancestors, and the tiles "
+          "that entered or left a zoom's range") {
+    UpdateScope scope;
+    scope.boxes.push_back({8.01, 46.01, 8.02, 46.02});
+    const TileRange t = tiles_covering(Scheme::Geodetic, scope.boxes[0], 10);
+    REQUIRE(t.count() == 1);
+    const std::int64_t x = t.x0, y = t.y0;
+    const std::vector<TileRange> was = {{8, x / 4 - 5, y / 4 - 5, x / 4 + 5, y / 4 + 5},
+                                        {10, x - 20, y - 20, x + 20, y + 20}};
+    std::vector<TileRange> now = was;
+    now[1].x1 = x + 21; // zoom 10 gains a column
+    const UpdateTiles tiles(scope, Scheme::Geodetic, was, now, {}, 0.25);
+    CHECK(tiles.contains(TileId{10, x, y}));
+    CHECK(tiles.contains(TileId{8, x / 4, y / 4})); // its ancestor
+    CHECK_FALSE(tiles.contains(TileId{10, x - 17, y}));
+    CHECK(tiles.contains(TileId{10, x + 21, y + 3}));            // entered the range
+    CHECK(tiles.contains(TileId{8, (x + 21) / 4, (y + 3) / 4})); // and its ancestor
+    CHECK_FALSE(tiles.contains(TileId{8, x / 4 - 4, y / 4 - 4}));
+    CHECK(tiles.left_out().empty());
+    // remade() counts the touched tiles within the new ranges, each once.
+    std::int64_t counted = 0;
+    for (const TileRange& r : now) {
+        for (std::int64_t ty = r.y0; ty <= r.y1; ++ty) {
+            for (std::int64_t tx = r.x0; tx <= r.x1; ++tx) {
+                counted += tiles.contains(TileId{r.z, tx, ty}) ? 1 : 0;
+            }
+        }
+    }
+    CHECK(counted > 41);
+    CHECK(tiles.remade() == counted);
+    // The other way round, the column is left out.
+    const UpdateTiles back(scope, Scheme::Geodetic, now, was, {}, 0.25);
+    CHECK(back.left_out().size() == 41);
+    // A whole zoom.
+    const UpdateTiles whole(UpdateScope{}, Scheme::Geodetic, was, was, {8}, 0.25);
+    CHECK(whole.contains(TileId{8, x / 4 - 4, y / 4 - 4}));
+    CHECK_FALSE(whole.contains(TileId{10, x - 17, y}));
+}

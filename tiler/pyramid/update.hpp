@@ -1,0 +1,88 @@
+#pragma once
+// `build --update`: which tiles a change of a build's DEMs touches, so that an update remakes
+// those alone and leaves the store as a full rebuild with the same DEMs would.
+//
+// A build manifest (tiler/pyramid/build.hpp) records, beside the tile settings, what an update
+// compares: each DEM's lon/lat bounds ("source_bounds"), each zoom's signature
+// (Layer::zoom_signature: "zooms", "dem_zooms") and the tile ranges the build planned
+// ("mesh_ranges", "dem_ranges"). From the last build's manifest and this run's:
+//   - every tile, when a setting every tile depends on changed (the Terrabound version, scheme,
+//     tile size, effort, datum, nodata, formats, --bbox, the order of the DEMs, ...);
+//   - every tile of a zoom whose signature changed (its eps, its budget, the pixel grids its
+//     blocks are cut from), or that only one of the two builds has;
+//   - the tiles meeting a DEM added, removed or replaced (its old bounds and its new ones), or
+//     the part of a pixel grid (a mosaic) that grew or shrank with it, widened by what a tile
+//     reads around itself (void filling's margin, the borders it shares with its neighbours):
+//     its neighbours' data decide its bytes too;
+//   - the tiles that entered or left a zoom's planned range;
+//   - and every ancestor of all those (a parent lists which children exist, and its error
+//     covers theirs).
+#include "tiler/layer.hpp"
+#include "tiler/stores/manifest.hpp"
+#include "tiler/tile_grid.hpp"
+
+#include <cstdint>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace tb::tiler {
+
+// The record of an update in progress: the manifest of the build it updates, written before
+// the first tile changes and removed once the tileset documents are in. An update that was
+// interrupted is finished by running it again, which reads its changes from this record.
+inline constexpr const char* kUpdateRecord = "build-update.json";
+
+// Build manifest entries: each DEM's lon/lat bounds ([w, s, e, n], or null where GDAL gives
+// none), in the order of `sources`; the tile ranges of one pyramid ([z, x0, y0, x1, y1] per
+// zoom); the signatures of zooms from..to (Layer::zoom_signature); the raster DEM pyramid's
+// zoom signatures (what its zoom's reads depend on beyond the data).
+std::string source_bounds_entry(const std::vector<std::string>& sources);
+// The pixel grids the layer reads (a file, or a mosaic of files on one grid): pixel size and
+// lon/lat extent of each.
+std::string source_grids_entry(const Layer& layer);
+std::string ranges_entry(const std::vector<TileRange>& ranges);
+std::string zooms_entry(const Layer& layer, int from, int to);
+std::string dem_zooms_entry(const Layer& layer, int from, int to);
+
+struct UpdateScope {
+    std::string everything;           // why every tile is remade; empty when only some are
+    std::vector<std::string> changes; // "added PATH", "replaced PATH", "removed PATH"
+    std::vector<LonLatBox> boxes;     // the old and the new bounds of every changed DEM
+    std::vector<int> zooms;           // mesh and terrain zooms remade whole
+    std::vector<int> dem_zooms;       // raster DEM zooms remade whole
+};
+
+// Compares the manifest of the last build (`was`) with this run's (`now`). InputError when
+// `was` lacks what an update compares (a build made before `--update` existed).
+UpdateScope update_scope(const Manifest& was, const Manifest& now);
+
+// The tiles of one pyramid an update remakes, or removes where the new build has none: the
+// scope's tiles within the ranges of either build.
+class UpdateTiles {
+public:
+    // `was` and `now`: the two builds' ranges of this pyramid (ranges_entry), `zooms` the
+    // scope's whole zooms of it, `around` how far a tile reads beyond its edges, in tiles.
+    UpdateTiles(const UpdateScope& scope,
+                Scheme scheme,
+                const std::vector<TileRange>& was,
+                const std::vector<TileRange>& now,
+                const std::vector<int>& zooms,
+                double around);
+
+    bool contains(const TileId& id) const;
+    // The tiles this update touches that the new build's ranges leave out, in zoom, row, column
+    // order: they are removed.
+    std::vector<TileId> left_out() const;
+    // How many tiles this update touches within the new build's ranges.
+    std::int64_t remade() const;
+
+private:
+    std::map<int, std::vector<TileRange>> touched_; // per zoom, overlapping rectangles
+    std::map<int, TileRange> was_, now_;
+};
+
+// The ranges a manifest entry written by ranges_entry lists (InputError when it does not parse).
+std::vector<TileRange> parse_ranges(const std::string& entry, const std::string& what);
+
+} // namespace tb::tiler
