@@ -199,9 +199,9 @@ public:
     virtual std::size_t tiles_over_eps() const = 0;
 
     // What decides every tile of zoom z beyond the data under it, as one line of JSON: where the
-    // zoom reads its heights (and the pixel grids its blocks are cut from), its eps and the
-    // budgets its mesh and globe terrain tiles are made to. `build --update` remakes a whole
-    // zoom whose line changed (tiler/pyramid/update.hpp).
+    // zoom reads its heights (and the origins of the pixel grids its reads are placed from), its
+    // eps and the budgets its mesh and globe terrain tiles are made to. `build --update` remakes a
+    // whole zoom whose line changed (tiler/pyramid/update.hpp).
     virtual std::string zoom_signature(int z) const = 0;
 
     // Ellipsoidal height range every tile's mesh stays within (padded by 1 m), metres.

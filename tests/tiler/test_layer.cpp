@@ -111,8 +111,9 @@ TEST_CASE("an SRTM cell gets zooms 7..10, a doubling eps ladder and consistent t
     CHECK(b.east == doctest::Approx(-71));
     CHECK(b.south == doctest::Approx(44));
     CHECK(b.north == doctest::Approx(45));
-    // 3" pixels at 44.5 N: about 78 m, so the finest eps is about 1.7 m.
-    CHECK(layer->eps_for_zoom(10) == doctest::Approx(1.74).epsilon(0.02));
+    // 3" pixels at 44.5 N: about 78 m, so the finest eps is about 1.74 m, rounded to the
+    // nearest step of 2^(1/8): 2^(6/8) = 1.68 m.
+    CHECK(layer->eps_for_zoom(10) == doctest::Approx(std::exp2(6.0 / 8)).epsilon(1e-9));
     // The ladder doubles per coarser zoom, raised where the zoom's cells are rougher (a share of
     // zoom_reach), never shrinking toward coarser zooms.
     for (int z = 0; z < 10; ++z) {

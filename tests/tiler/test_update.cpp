@@ -170,8 +170,8 @@ void touch_later(const std::string& path) {
 TEST_CASE("build --update after a DEM is added, replaced or removed equals a full build, byte "
           "for byte, in a directory and in SQLite") {
     ScratchDir dir;
-    // A 0.8 degree cell, a block on its grid at its east edge (a mosaic that grows), and a
-    // finer block inside it (a collection of two resolutions).
+    // A 0.8 degree cell, a block on its grid at its east edge (a mosaic that grows), a finer
+    // block inside it (a collection of two resolutions), and later one at its north-west corner.
     const std::string a = write_dem(dir.file("a.tif"), 8.0, 47.0, 193, 193, 0.8 / 192, 0);
     const std::string b = write_dem(dir.file("b.tif"), 8.6, 46.7, 97, 49, 0.8 / 192, 1);
     const std::string c = write_dem(dir.file("c.tif"), 8.2, 46.5, 97, 97, 0.1 / 96, 2);
@@ -193,6 +193,12 @@ TEST_CASE("build --update after a DEM is added, replaced or removed equals a ful
         const BuildSummary removed = build(options({a, c}, out), true);
         CHECK(removed.removed > 0); // the tiles east of a held b's data alone
         check_same_as_full({a, c}, out, fresh, removed);
+        INFO("added d, growing a's grid north-west");
+        // The grid's origin moves, and every read is placed from it.
+        const double step = 0.8 / 192;
+        const std::string d =
+            write_dem(dir.file("d.tif"), 8.0 - 24 * step, 47.0 + 24 * step, 48, 48, step, 3);
+        check_same_as_full({a, c, d}, out, fresh, build(options({a, c, d}, out), true), false);
         const auto store = TileStore::open(out);
         CHECK_FALSE(store->get_document("terrain", kUpdateRecord));
     }

@@ -26,6 +26,19 @@ namespace {
 // far below CesiumJS's level geometric error (77067 m / 2^z, about 75 m at SRTM3's z = 10).
 constexpr double kResolutionPerEps = 45.0;
 
+// Data-driven eps (the default finest eps, a zoom's reach share) is rounded to the nearest step
+// of 2^(1/kStepsPerOctave), within 4.4 % of the statistic either way: the statistics behind it
+// move a little whenever the DEMs change (the resolution in metres with the extent's middle
+// latitude, a zoom's median roughness with every tile), and every tile of a zoom whose eps
+// moved must be made again (build --update). On steps they rarely move. Rounded to the nearest
+// rather than down, the meshes are as heavy as without steps on average (both statistics are
+// tuned defaults, not bounds: what a tile publishes is measured).
+constexpr double kStepsPerOctave = 8;
+
+double on_step(double eps) {
+    return std::exp2(std::round(std::log2(eps) * kStepsPerOctave) / kStepsPerOctave);
+}
+
 // The step between two heights an integer DEM can store, metres (its scale), or 0 for floating
 // point data. The default eps is never below it: stored heights are rounded to it, so a mesh held
 // closer than one step follows the rounding's staircase, a contour line at every step, instead
@@ -78,11 +91,11 @@ LayerPlan::LayerPlan(const LayerOptions& options, const DemSource& source)
     // source's pixels when max_zoom is set below the native zoom.
     const double pixels =
         std::max(1.0, source_.pixels_per_sample(options_.scheme, max_zoom_, options_.tile_size));
-    finest_eps_ =
-        options_.finest_eps
-            ? *options_.finest_eps
-            : std::max(
-                  {kMinEps, info.resolution_m * pixels / kResolutionPerEps, height_step(info)});
+    finest_eps_ = options_.finest_eps
+                      ? *options_.finest_eps
+                      : std::max({kMinEps,
+                                  on_step(info.resolution_m * pixels / kResolutionPerEps),
+                                  height_step(info)});
     compute_height_range();
 }
 
@@ -93,7 +106,8 @@ double LayerPlan::eps_for_zoom(int z) const {
     if (!summary_ok_ || z < 0 || z >= max_zoom_ || zoom_source(z) == ZoomSource::Pixels) {
         return ladder;
     }
-    return std::max(ladder, kReachShare * reach()[static_cast<std::size_t>(z)]);
+    const double r = reach()[static_cast<std::size_t>(z)];
+    return r > 0 ? std::max(ladder, on_step(kReachShare * r)) : ladder;
 }
 
 // The eps globe terrain is meshed at: the ladder, or a share of CesiumJS's own level error
@@ -118,16 +132,14 @@ std::string LayerPlan::zoom_signature(int z) const {
                       json_number(eps_for_zoom(z)) + ", " + budget(budget_at(z, eps_for_zoom(z))) +
                       ", " + json_number(terrain_eps_for_zoom(z)) + ", " +
                       budget(terrain_budget_at(z, terrain_eps_for_zoom(z)));
-    // Blocks of pixels (summary blocks, decimated reads) are cut from a grid's origin, which
-    // moves when a mosaic grows west or north (its extent is compared apart: update.hpp).
-    const ReadLevel level = source_.read_level(options_.scheme, z, options_.tile_size);
-    if (from == ZoomSource::Summary ||
-        (from == ZoomSource::Lattice && (level.step > 1 || level.overview >= 0))) {
-        for (const DemInfo* part : source_.parts()) {
-            const auto& g = part->geotransform;
-            out += ", [" + json_number(g[0]) + ", " + json_number(g[3]) + ", " + json_number(g[1]) +
-                   ", " + json_number(g[5]) + "]";
-        }
+    // Every read of a zoom is placed from a grid's origin, which moves when a mosaic grows west
+    // or north (its extent is compared apart: update.hpp): summary blocks and decimated reads
+    // are cut from it, and a lattice point's or a vertex's place among the pixels is a
+    // difference from it, whose last bits (so a normal's or a bilinear height's) move with it.
+    for (const DemInfo* part : source_.parts()) {
+        const auto& g = part->geotransform;
+        out += ", [" + json_number(g[0]) + ", " + json_number(g[3]) + ", " + json_number(g[1]) +
+               ", " + json_number(g[5]) + "]";
     }
     return out + "]";
 }

@@ -381,13 +381,10 @@ std::string dem_zooms_entry(const Layer& layer, int from, int to) {
     std::string out = "[";
     for (int z = from; z <= to; ++z) {
         out += (z > from ? ", [" : "[") + std::to_string(z);
-        // A raster DEM tile coarser than the pixels reads blocks of them (summary blocks or
-        // decimated reads), cut from each grid's origin.
-        if (layer.source().pixels_per_sample(Scheme::Mercator, z, layer.options().dem_tile_size) >
-            1 + 1e-9) {
-            for (const DemInfo* part : layer.source().parts()) {
-                out += ", " + grid_text(*part);
-            }
+        // A raster DEM tile's reads are placed from each grid's origin (blocks of pixels cut
+        // from it, bilinear samples a difference from it), as a mesh zoom's are.
+        for (const DemInfo* part : layer.source().parts()) {
+            out += ", " + grid_text(*part);
         }
         out += "]";
     }

@@ -8,8 +8,8 @@
 // ("mesh_ranges", "dem_ranges"). From the last build's manifest and this run's:
 //   - every tile, when a setting every tile depends on changed (the Terrabound version, scheme,
 //     tile size, effort, datum, nodata, formats, --bbox, the order of the DEMs, ...);
-//   - every tile of a zoom whose signature changed (its eps, its budget, the pixel grids its
-//     blocks are cut from), or that only one of the two builds has;
+//   - every tile of a zoom whose signature changed (its eps, its budget, the origins of the
+//     pixel grids its reads are placed from), or that only one of the two builds has;
 //   - the tiles meeting a DEM added, removed or replaced (its old bounds and its new ones), or
 //     the part of a pixel grid (a mosaic) that grew or shrank with it, widened by what a tile
 //     reads around itself (void filling's margin, the borders it shares with its neighbours):
