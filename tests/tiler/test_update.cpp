@@ -220,7 +220,24 @@ TEST_CASE("an interrupted update is finished by running it again; --resume alone
     CHECK_THROWS_WITH_AS(build(resume),
                          doctest::Contains("an update of it (build --update) was interrupted"),
                          tb::InputError);
+    // Nothing serves or converts the half-updated layer, and an update to other DEMs must
+    // wait: the tiles the interrupted one wrote would go unseen.
+    CHECK_THROWS_WITH_AS(prepare_store_for_serving(*TileStore::open(out), "terrain", Manifest{}),
+                         doctest::Contains("has not finished"),
+                         tb::InputError);
+    CHECK_THROWS_WITH_AS(build(options({a}, out), true),
+                         doctest::Contains("an update to other DEMs or settings was interrupted"),
+                         tb::InputError);
     check_same_as_full({a, b}, out, dir.file("fresh"), build(options({a, b}, out), true));
+
+    const std::string store = dir.file("tiles.sqlite"), err = dir.file("convert.err");
+    build(options({a}, store));
+    o.output = store;
+    CHECK(build_pyramid(o, stop).interrupted);
+    const std::string convert = std::string(TB_BINARY) + " build " + store + " -o " +
+                                dir.file("dem.pmtiles") + " --formats terrarium 2>" + err;
+    CHECK(std::system(convert.c_str()) != 0);
+    CHECK(slurp(err).find("has not finished") != std::string::npos);
 }
 
 TEST_CASE("a sharded update and --finalize equal a sharded full build; the earlier build's "
@@ -266,6 +283,13 @@ TEST_CASE("--update refuses what it cannot update, naming the way out") {
     BuildOptions o = options({a}, dir.file("out"));
     o.force = true;
     CHECK_THROWS_WITH_AS(build(o, true), doctest::Contains("--force starts over"), tb::InputError);
+    // Formats dropped would leave their tiles behind.
+    build(options({a}, dir.file("out")));
+    o = options({a}, dir.file("out"));
+    o.formats = {Format::Glb};
+    CHECK_THROWS_WITH_AS(build(o, true),
+                         doctest::Contains("an update keeps a build's formats and --bbox"),
+                         tb::InputError);
     o = options({a}, dir.file("dem.mbtiles"));
     o.formats = {Format::Terrarium};
     build(o);

@@ -31,6 +31,7 @@
 #include <filesystem>
 #include <map>
 #include <mutex>
+#include <set>
 #include <sstream>
 #include <thread>
 #include <unistd.h>
@@ -405,6 +406,7 @@ make_manifest(const BuildOptions& o, const Layer& layer, const Plan& plan, int s
     // What an update compares (update.hpp).
     m.emplace_back("source_bounds", source_bounds_entry(layer.options().sources));
     m.emplace_back("source_grids", source_grids_entry(layer));
+    m.emplace_back("data_bounds", box_entry(layer.data_bounds()));
     m.emplace_back("zooms", zooms_entry(layer, 0, layer.max_zoom()));
     const bool dem = std::any_of(o.formats.begin(), o.formats.end(), is_dem_format);
     const DemTilePlan d = dem_tile_plan(layer);
@@ -572,6 +574,33 @@ bool parse_tile_uri(const std::string& path, TileId& id, Format& format) {
     return true;
 }
 
+// The documents the stored tileset.json of layer `name` reaches through "uri"s (tileset.json
+// among them), or none: what an earlier build wrote, for write_tileset to remove those the new
+// tileset no longer reaches (a pyramid made deeper or shallower by an update).
+std::set<std::string> stored_tileset_documents(const TileStore& store, const std::string& name) {
+    std::set<std::string> out;
+    std::vector<std::string> todo{"tileset.json"};
+    while (!todo.empty()) {
+        const std::string path = todo.back();
+        todo.pop_back();
+        const auto bytes = store.get_document(name, path);
+        if (!bytes || !out.insert(path).second) {
+            continue;
+        }
+        const auto slash = path.rfind('/');
+        const std::string dir = slash == std::string::npos ? "" : path.substr(0, slash + 1);
+        for (const auto& uri : uris_in(*bytes)) {
+            const std::string target = normalize(dir, uri);
+            TileId id;
+            Format format;
+            if (!target.empty() && !parse_tile_uri(target, id, format) && !out.count(target)) {
+                todo.push_back(target);
+            }
+        }
+    }
+    return out;
+}
+
 // Collects the layer's documents by following "uri"s from tileset.json, checks that every tile
 // they name is in the store, then writes them with tileset.json last. Returns false (and says
 // why in the log) when a named tile is missing, writing nothing.
@@ -613,10 +642,17 @@ bool write_tileset(const Layer& layer, TileStore& store, const std::string& name
         }
         docs.emplace_back(path, std::move(bytes));
     }
+    std::set<std::string> stale = stored_tileset_documents(store, name);
     for (std::size_t i = docs.size(); i-- > 1;) {
         store.put_document(name, docs[i].first, docs[i].second);
     }
     store.put_document(name, docs[0].first, docs[0].second);
+    for (const auto& [path, bytes] : docs) {
+        stale.erase(path);
+    }
+    for (const std::string& path : stale) { // unreachable now: nothing lists them
+        store.remove_document(name, path);
+    }
     log::info("build: wrote " + std::to_string(docs.size()) + " tileset document(s) listing " +
               std::to_string(tiles) + " tiles");
     return true;
@@ -739,6 +775,17 @@ Manifest start_update(const BuildOptions& o,
                          "); build it once without --update");
     }
     const std::string text = manifest_text(manifest);
+    if (pending && *existing != text) {
+        // The interrupted update wrote tiles for its own DEMs and settings, which the record's
+        // comparison with this run's would not see: finish it as it was started first.
+        const auto change = first_change(parse_manifest(*existing), manifest);
+        throw InputError(
+            where + ": an update to other DEMs or settings was interrupted" +
+            (change ? " (" + change->key + " was " + change->was + ", now " + change->now + ")"
+                    : std::string()) +
+            "; finish it first by running that build again with --update, or "
+            "rebuild with --force");
+    }
     if (!pending && *existing != text) {
         store.put_document(name, kUpdateRecord, *existing); // before any tile changes
     }
@@ -1309,7 +1356,9 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
                 write_terrain_tileset(*layer, *store, name);
             }
             write_static_hosting(o, *layer, *store, name);
-            if (summary.tileset_written || !mesh_formats) {
+            // Every planned tile is in: a tileset left out only for --bbox does not keep the
+            // update pending.
+            if (summary.tileset_written || !mesh_formats || o.bbox) {
                 finish_update(*store, name);
             }
             store->finish();

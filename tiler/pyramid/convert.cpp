@@ -214,6 +214,12 @@ container_documents(const SqliteDb& db, const std::string& input, const Choice& 
                          "(terrabound build DEM -o OUT.pmtiles --formats " +
                          format + ")");
     }
+    if (read_document(db, c.layer, kUpdateRecord)) {
+        throw InputError(input + ": an update of layer " + c.layer +
+                         " (terrabound build --update) has not finished, so its tiles are part "
+                         "old, part new; finish it by running that build again with --update, "
+                         "then convert");
+    }
     Manifest manifest = parse_manifest(*text);
     if (manifest_value(manifest, "formats").find(json_string(format)) == std::string::npos) {
         throw InputError(input + ": layer " + c.layer + " was built without " + format +

@@ -141,6 +141,14 @@ std::string LayerPlan::zoom_signature(int z) const {
         out += ", [" + json_number(g[0]) + ", " + json_number(g[3]) + ", " + json_number(g[1]) +
                ", " + json_number(g[5]) + "]";
     }
+    // Globe terrain coarser than its data's zooms is flat filler, whose error over the data is
+    // the layer's relief.
+    if (z < terrain_min_zoom_) {
+        const LonLatBox& f = footprint_;
+        out += ", [" + json_number(relief()) + ", " + json_number(f.west) + ", " +
+               json_number(f.south) + ", " + json_number(f.east) + ", " + json_number(f.north) +
+               "]";
+    }
     return out + "]";
 }
 

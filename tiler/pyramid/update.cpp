@@ -21,6 +21,7 @@ using nlohmann::json;
 const std::set<std::string> kCompared = {"sources",
                                          "source_bounds",
                                          "source_grids",
+                                         "data_bounds",
                                          "eps",
                                          "min_zoom",
                                          "max_zoom",
@@ -234,6 +235,27 @@ std::vector<LonLatBox> box_minus(const LonLatBox& a, const LonLatBox& b) {
     return out;
 }
 
+// Where one of two boxes lies and the other does not joins the scope's boxes.
+void add_difference(UpdateScope& scope, const LonLatBox& was, const LonLatBox& now) {
+    if (was.west == now.west && was.south == now.south && was.east == now.east &&
+        was.north == now.north) {
+        return;
+    }
+    for (const auto& [a, b] : {std::pair{was, now}, std::pair{now, was}}) {
+        for (const LonLatBox& piece : box_minus(a, b)) {
+            scope.boxes.push_back(piece);
+        }
+    }
+}
+
+LonLatBox box_of(const Manifest& m, const std::string& key, const std::string& which) {
+    const json b = parse_entry(m, key, which);
+    if (!b.is_array() || b.size() != 4 || !all_numbers(b)) {
+        throw unparsable(which, key);
+    }
+    return {b[0].get<double>(), b[1].get<double>(), b[2].get<double>(), b[3].get<double>()};
+}
+
 // A pixel grid as source_grids_entry records it: pixel size, then lon/lat extent.
 struct Grid {
     double dx = 0, dy = 0;
@@ -279,20 +301,14 @@ void compare_grids(UpdateScope& scope, const Manifest& was, const Manifest& now)
             continue;
         }
         matched[k] = true;
-        for (const auto& [a, b] :
-             {std::pair{before[k].box, g.box}, std::pair{g.box, before[k].box}}) {
-            if (a.west != b.west || a.south != b.south || a.east != b.east || a.north != b.north) {
-                for (const LonLatBox& piece : box_minus(a, b)) {
-                    scope.boxes.push_back(piece);
-                }
-            }
-        }
+        add_difference(scope, before[k].box, g.box);
     }
     for (std::size_t k = 0; k < before.size(); ++k) {
         if (!matched[k]) {
             scope.boxes.push_back(before[k].box);
         }
     }
+    add_difference(scope, box_of(was, "data_bounds", "last"), box_of(now, "data_bounds", "new"));
 }
 
 // How many tiles the rectangles cover together: a sweep over the rows where they start or end,
@@ -341,6 +357,11 @@ std::string source_grids_entry(const Layer& layer) {
                json_number(b.east) + ", " + json_number(b.north) + "]";
     }
     return out + "]";
+}
+
+std::string box_entry(const LonLatBox& b) {
+    return "[" + json_number(b.west) + ", " + json_number(b.south) + ", " + json_number(b.east) +
+           ", " + json_number(b.north) + "]";
 }
 
 std::string source_bounds_entry(const std::vector<std::string>& sources) {
@@ -415,10 +436,10 @@ std::vector<TileRange> parse_ranges(const std::string& entry, const std::string&
         if (t.z < 0 || t.z > kMaxZoom) {
             throw bad();
         }
-        // Columns and rows of either scheme lie in 0..2^(z+1); -1 is an empty range's edge.
+        // Columns and rows of either scheme lie in 0..2^(z+1) - 1; -1 is an empty range's edge.
         const std::int64_t limit = std::int64_t{2} << t.z;
         for (const std::int64_t v : {t.x0, t.y0, t.x1, t.y1}) {
-            if (v < -1 || v > limit) {
+            if (v < -1 || v >= limit) {
                 throw bad();
             }
         }
@@ -426,17 +447,36 @@ std::vector<TileRange> parse_ranges(const std::string& entry, const std::string&
     return out;
 }
 
+// The first setting beyond those compared entry by entry that differs between the two
+// manifests, in either direction (a setting cleared is a change too), as "KEY changed (was X,
+// now Y)"; empty when none does.
+std::string changed_setting(const Manifest& was, const Manifest& now) {
+    for (const auto& [first, second] : {std::pair{&now, &was}, std::pair{&was, &now}}) {
+        for (const auto& [key, value] : *first) {
+            const std::string other = manifest_value(*second, key);
+            if (kCompared.count(key) || other == value ||
+                (key == "overlap" && other == "(absent)")) {
+                continue; // one DEM has no overlap rule: adding a second does not change it
+            }
+            // A format or --bbox dropped would leave its tiles and documents behind.
+            if (key == "formats" || key == "bbox") {
+                throw InputError("build --update: " + key + " changed (was " +
+                                 manifest_value(was, key) + ", now " + manifest_value(now, key) +
+                                 "); an update keeps a build's formats and --bbox: rebuild with "
+                                 "--force");
+            }
+            return key + " changed (was " + manifest_value(was, key) + ", now " +
+                   manifest_value(now, key) + ")";
+        }
+    }
+    return {};
+}
+
 UpdateScope update_scope(const Manifest& was, const Manifest& now) {
     UpdateScope scope;
-    for (const auto& [key, value] : now) {
-        if (kCompared.count(key) || (key == "overlap" && manifest_value(was, key) == "(absent)")) {
-            continue; // one DEM has no overlap rule: adding a second does not change it
-        }
-        const std::string before = manifest_value(was, key);
-        if (before != value) {
-            scope.everything = key + " changed (was " + before + ", now " + value + ")";
-            return scope;
-        }
+    scope.everything = changed_setting(was, now);
+    if (!scope.everything.empty()) {
+        return scope;
     }
     compare_dems(scope, was, now);
     if (!scope.everything.empty()) {

@@ -28,11 +28,6 @@
 
 namespace tb::tiler {
 
-// The record of an update in progress: the manifest of the build it updates, written before
-// the first tile changes and removed once the tileset documents are in. An update that was
-// interrupted is finished by running it again, which reads its changes from this record.
-inline constexpr const char* kUpdateRecord = "build-update.json";
-
 // Build manifest entries: each DEM's lon/lat bounds ([w, s, e, n], or null where GDAL gives
 // none), in the order of `sources`; the tile ranges of one pyramid ([z, x0, y0, x1, y1] per
 // zoom); the signatures of zooms from..to (Layer::zoom_signature); the raster DEM pyramid's
@@ -41,6 +36,9 @@ std::string source_bounds_entry(const std::vector<std::string>& sources);
 // The pixel grids the layer reads (a file, or a mosaic of files on one grid): pixel size and
 // lon/lat extent of each.
 std::string source_grids_entry(const Layer& layer);
+// A lon/lat box as [w, s, e, n]: the layer's data bounds, to which raster DEM tiles carry the
+// data's edge (a change of them changes the tiles along both the old and the new edge).
+std::string box_entry(const LonLatBox& box);
 std::string ranges_entry(const std::vector<TileRange>& ranges);
 std::string zooms_entry(const Layer& layer, int from, int to);
 std::string dem_zooms_entry(const Layer& layer, int from, int to);

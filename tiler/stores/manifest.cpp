@@ -83,6 +83,12 @@ StoreUse prepare_store_for_serving(TileStore& store, const std::string& name, co
     const std::string where = store.describe() + " (layer " + name + ")";
 
     if (const auto text = store.get_document(name, kBuildManifest)) {
+        if (store.get_document(name, kUpdateRecord)) {
+            throw InputError(where +
+                             ": an update of its build (terrabound build --update) has not "
+                             "finished, so its tiles are part old, part new; finish it by running "
+                             "that build again with --update, then serve it");
+        }
         const Manifest built = parse_manifest(*text);
         const auto change =
             first_change(built, now, {"bbox", "formats", "shard_count", "eps_levels", "version"});

@@ -20,6 +20,12 @@ namespace tb::tiler {
 
 inline constexpr const char* kBuildManifest = "build-manifest.json";
 inline constexpr const char* kServeManifest = "serve-manifest.json";
+// The record of a `build --update` in progress (tiler/pyramid/update.hpp): the manifest of the
+// build it updates, written before the first tile changes and removed once the tileset
+// documents are in. While it is there the layer's tiles are part old, part new: an update that
+// was interrupted is finished by running it again, which reads its changes from this record,
+// and nothing serves or converts the layer meanwhile.
+inline constexpr const char* kUpdateRecord = "build-update.json";
 
 using Manifest = std::vector<std::pair<std::string, std::string>>; // key, JSON value
 
