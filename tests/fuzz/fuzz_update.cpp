@@ -26,7 +26,7 @@ void touch(const UpdateScope& scope,
     for (const TileRange& r : after) {
         total += r.empty() ? 0 : r.count();
     }
-    if (remade < 0 || remade > total) {
+    if (remade < 0 || remade > total || tiles.left_out_count() < 0) {
         std::abort(); // counts tiles of the new ranges, each once
     }
     for (const TileRange& r : after) {

@@ -914,16 +914,16 @@ Update plan_update(const Manifest& was, const Manifest& now, const Layer& layer,
     }
     log::info("build --update: " + changes_text(scope.changes) + "; remaking " +
               std::to_string(u.mesh.remade() + u.dem.remade()) + " tiles" + zooms + ", removing " +
-              std::to_string(u.mesh.left_out().size() + u.dem.left_out().size()) +
+              std::to_string(u.mesh.left_out_count() + u.dem.left_out_count()) +
               " that no longer hold data");
     return u;
 }
 
-// Removes the tiles of `ids` that `mine` owns, in every format of their pyramid. Returns how
-// many tiles it removed.
+// Removes the tiles `tiles` leaves out that `mine` owns, in every format of their pyramid.
+// Returns how many tiles it removed.
 std::int64_t remove_left_out(TileStore& store,
                              const BuildOptions& o,
-                             const std::vector<TileId>& ids,
+                             const UpdateTiles& tiles,
                              bool dem,
                              const std::function<bool(const TileId&)>& mine) {
     std::vector<Format> formats;
@@ -933,12 +933,12 @@ std::int64_t remove_left_out(TileStore& store,
         }
     }
     std::int64_t removed = 0;
-    for (const TileId& id : ids) {
+    tiles.for_each_left_out([&](const TileId& id) {
         if (mine(id) && !formats.empty()) {
             remove_tile(store, o.layer.name, id, formats);
             ++removed;
         }
-    }
+    });
     return removed;
 }
 
@@ -1037,6 +1037,148 @@ std::string to_json(const BuildSummary& s) {
            ",\"tiles_over_eps\":" + std::to_string(s.over_eps) + "}";
 }
 
+// The formats of tile `made`'s pyramid that `made` holds no tile of: an update removes them.
+void note_removed(const BuildOptions& o, Made& made) {
+    for (Format f : o.formats) {
+        const bool has = std::any_of(
+            made.tiles.begin(), made.tiles.end(), [f](const auto& t) { return t.first == f; });
+        if (is_dem_format(f) == made.dem && !has) {
+            made.removed.push_back(f);
+        }
+    }
+}
+
+// What a worker does with tile i of the plan: nothing (already in the store, empty, or failed;
+// counted in `counters`), or the tiles for the writer, with an update's removals. An update
+// remakes the tiles it touches whether they are in the store or not. IoError when the DEM
+// became unreadable.
+std::optional<Made> make_planned_tile(const BuildOptions& o,
+                                      const Layer& layer,
+                                      const TileStore& store,
+                                      const Plan& plan,
+                                      std::int64_t i,
+                                      const std::optional<Update>& update,
+                                      bool check_present,
+                                      Counters& counters) {
+    const ValidTile tile = plan.at(i);
+    const TileId& id = tile.id();
+    const bool dem = plan.dem(i);
+    const bool remake = update && update->touches(id, dem);
+    Made made{id, {}, dem, {}};
+    if (!dem && !layer.may_have_tile(tile) && !wants_terrain(layer, o)) {
+        ++counters.empty;
+        if (remake) {
+            note_removed(o, made);
+            return made;
+        }
+        return std::nullopt;
+    }
+    std::vector<Format> formats;
+    for (Format f : o.formats) {
+        if (is_dem_format(f) == dem && makes(layer, f, tile)) {
+            formats.push_back(f);
+        }
+    }
+    if (check_present && !remake && std::all_of(formats.begin(), formats.end(), [&](Format f) {
+            return store.contains(TileKey{o.layer.name, id, f, -1});
+        })) {
+        ++counters.skipped;
+        return std::nullopt;
+    }
+    try {
+        if (dem) {
+            for (Format f : formats) {
+                try {
+                    made.tiles.emplace_back(f, make_dem_tile(layer, tile, f));
+                } catch (const NotFound&) {
+                    // no data for this format here; the others may have some
+                }
+            }
+        } else {
+            // Formats without data here are left out; the others share meshes.
+            made.tiles = layer.make_tiles(tile, formats);
+            keep_terrain_extensions(made, o.terrain_extensions);
+        }
+    } catch (const IoError&) {
+        throw; // the DEM became unreadable: no point going on
+    } catch (const std::exception& e) {
+        ++counters.failed;
+        log::error(std::string("build: ") + (dem ? "DEM tile " : "tile ") + tile_name(id) + ": " +
+                   e.what());
+        return std::nullopt;
+    }
+    if (remake) {
+        note_removed(o, made);
+    }
+    if (made.tiles.empty()) {
+        ++counters.empty;
+        return made.removed.empty() ? std::nullopt : std::optional<Made>(std::move(made));
+    }
+    return made;
+}
+
+// Writes the layer's documents once its tiles are in: the 3D Tiles tileset (mesh formats; a
+// build of DEM tiles alone has no mesh tiles for one to list), layer.json, the terrain tileset,
+// the static hosting files. Returns whether the tileset was written.
+bool write_documents(
+    const BuildOptions& o, const Layer& layer, TileStore& store, bool mesh_formats, bool terrain) {
+    const std::string& name = o.layer.name;
+    store.clean_up(name);
+    const bool tileset = mesh_formats && write_tileset(layer, store, name, o.bbox.has_value());
+    if (terrain && wants(o, Format::Terrain)) {
+        write_layer_json(layer, store, name, o.terrain_extensions);
+    }
+    if (terrain && wants(o, Format::Terrain3d)) {
+        write_terrain_tileset(layer, store, name);
+    }
+    write_static_hosting(o, layer, store, name);
+    return tileset;
+}
+
+// --finalize: once every shard has reported under this build's manifest (their tiles are then
+// all in: a shard reports last), writes the documents and ends an update.
+BuildSummary finalize_shards(const BuildOptions& o,
+                             const Layer& layer,
+                             TileStore& store,
+                             const Prepared& prepared,
+                             bool mesh_formats,
+                             bool terrain,
+                             Clock::time_point start) {
+    const std::string& name = o.layer.name;
+    const std::string where = o.output + " (layer " + name + ")";
+    const int shard_count = prepared.shard_count;
+    BuildSummary summary;
+    std::int64_t reported = 0;
+    for (int i = 0; i < shard_count; ++i) {
+        const ShardSpec s{i, shard_count};
+        const auto text = store.get_document(name, shard_document(s));
+        const auto record = text ? parse_shard_record(*text) : std::nullopt;
+        if (!record || record->manifest != store_checksum(manifest_text(prepared.manifest))) {
+            throw InputError(where + ": shard " + std::to_string(i) + "/" +
+                             std::to_string(shard_count) + " has not finished (no " +
+                             shard_document(s) + "); run it again with --shard " +
+                             std::to_string(i) + "/" + std::to_string(shard_count) +
+                             " --resume, then --finalize");
+        }
+        reported += record->present;
+        summary.skipped += record->present;
+        summary.empty += record->empty;
+    }
+    summary.planned = summary.skipped + summary.empty;
+    summary.tileset_written = write_documents(o, layer, store, mesh_formats, terrain);
+    if (mesh_formats && !summary.tileset_written) {
+        throw IoError(where + ": --finalize: tiles the tileset lists are missing although "
+                              "every shard reported (see the warning above); run each shard "
+                              "again with --resume");
+    }
+    finish_update(store, name);
+    store.finish();
+    log::info("build: finalized " + std::to_string(shard_count) + " shard(s), " +
+              std::to_string(reported) + " tiles");
+    summary.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+    return summary;
+}
+
 BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop) {
     const auto start = Clock::now();
     check_options(o);
@@ -1056,7 +1198,6 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
     const Plan plan = make_plan(*layer, o);
     Prepared prepared;
     output_lock.setup([&] { prepared = prepare_output(o, *layer, plan, *store, where); });
-    const int shard_count = prepared.shard_count;
     const std::optional<Update> update =
         prepared.updated
             ? std::optional<Update>(plan_update(*prepared.updated, prepared.manifest, *layer, plan))
@@ -1070,45 +1211,7 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
     BuildSummary summary;
 
     if (o.finalize) {
-        // Every shard must have reported; their tiles are then all in (a shard reports last).
-        std::int64_t reported = 0;
-        for (int i = 0; i < shard_count; ++i) {
-            const ShardSpec s{i, shard_count};
-            const auto text = store->get_document(name, shard_document(s));
-            const auto record = text ? parse_shard_record(*text) : std::nullopt;
-            if (!record || record->manifest != store_checksum(manifest_text(prepared.manifest))) {
-                throw InputError(where + ": shard " + std::to_string(i) + "/" +
-                                 std::to_string(shard_count) + " has not finished (no " +
-                                 shard_document(s) + "); run it again with --shard " +
-                                 std::to_string(i) + "/" + std::to_string(shard_count) +
-                                 " --resume, then --finalize");
-            }
-            reported += record->present;
-            summary.skipped += record->present;
-            summary.empty += record->empty;
-        }
-        summary.planned = summary.skipped + summary.empty;
-        store->clean_up(name);
-        summary.tileset_written =
-            mesh_formats && write_tileset(*layer, *store, name, o.bbox.has_value());
-        if (terrain && wants(o, Format::Terrain)) {
-            write_layer_json(*layer, *store, name, o.terrain_extensions);
-        }
-        if (terrain && wants(o, Format::Terrain3d)) {
-            write_terrain_tileset(*layer, *store, name);
-        }
-        write_static_hosting(o, *layer, *store, name);
-        if (mesh_formats && !summary.tileset_written) {
-            throw IoError(where + ": --finalize: tiles the tileset lists are missing although "
-                                  "every shard reported (see the warning above); run each shard "
-                                  "again with --resume");
-        }
-        finish_update(*store, name);
-        store->finish();
-        log::info("build: finalized " + std::to_string(shard_count) + " shard(s), " +
-                  std::to_string(reported) + " tiles");
-        summary.seconds = std::chrono::duration<double>(Clock::now() - start).count();
-        return summary;
+        return finalize_shards(o, *layer, *store, prepared, mesh_formats, terrain, start);
     }
 
     // This run's share of the plan.
@@ -1148,86 +1251,15 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
                 if (i >= plan.total) {
                     return;
                 }
-                const ValidTile tile = plan.at(i);
-                const TileId& id = tile.id();
-                const bool dem = plan.dem(i);
-                if (!mine(id)) {
+                if (!mine(plan.at(i).id())) {
                     continue;
                 }
-                // An update remakes the tiles it touches whether present or not.
-                const bool remake = update && update->touches(id, dem);
-                Made made{id, {}, dem, {}};
-                if (!dem && !layer->may_have_tile(tile) && !wants_terrain(*layer, o)) {
-                    ++counters.empty;
-                    if (remake) {
-                        for (Format f : o.formats) {
-                            if (!is_dem_format(f)) {
-                                made.removed.push_back(f);
-                            }
-                        }
-                        queue.push(std::move(made));
-                    }
+                std::optional<Made> made =
+                    make_planned_tile(o, *layer, *store, plan, i, update, check_present, counters);
+                if (!made) {
                     continue;
                 }
-                if (check_present && !remake) {
-                    bool all = true;
-                    for (Format f : o.formats) {
-                        if (is_dem_format(f) == dem && makes(*layer, f, tile)) {
-                            all = all && store->contains(TileKey{name, id, f, -1});
-                        }
-                    }
-                    if (all) {
-                        ++counters.skipped;
-                        continue;
-                    }
-                }
-                try {
-                    std::vector<Format> formats;
-                    for (Format f : o.formats) {
-                        if (is_dem_format(f) == dem && makes(*layer, f, tile)) {
-                            formats.push_back(f);
-                        }
-                    }
-                    if (dem) {
-                        for (Format f : formats) {
-                            try {
-                                made.tiles.emplace_back(f, make_dem_tile(*layer, tile, f));
-                            } catch (const NotFound&) {
-                                // no data for this format here; the others may have some
-                            }
-                        }
-                    } else {
-                        // Formats without data here are left out; the others share meshes.
-                        made.tiles = layer->make_tiles(tile, formats);
-                        keep_terrain_extensions(made, o.terrain_extensions);
-                    }
-                    if (remake) {
-                        for (Format f : o.formats) {
-                            const bool has =
-                                std::any_of(made.tiles.begin(),
-                                            made.tiles.end(),
-                                            [f](const auto& t) { return t.first == f; });
-                            if (is_dem_format(f) == dem && !has) {
-                                made.removed.push_back(f);
-                            }
-                        }
-                    }
-                    if (made.tiles.empty()) {
-                        ++counters.empty;
-                        if (!made.removed.empty()) {
-                            queue.push(std::move(made));
-                        }
-                        continue;
-                    }
-                } catch (const IoError&) {
-                    throw; // the DEM became unreadable: no point going on
-                } catch (const std::exception& e) {
-                    ++counters.failed;
-                    log::error(std::string("build: ") + (dem ? "DEM tile " : "tile ") +
-                               tile_name(id) + ": " + e.what());
-                    continue;
-                }
-                if (!queue.push(std::move(made))) {
+                if (!queue.push(std::move(*made))) {
                     return;
                 }
             }
@@ -1334,8 +1366,8 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
 
     if (!summary.interrupted && summary.failed == 0) {
         if (update) {
-            summary.removed += remove_left_out(*store, o, update->mesh.left_out(), false, mine);
-            summary.removed += remove_left_out(*store, o, update->dem.left_out(), true, mine);
+            summary.removed += remove_left_out(*store, o, update->mesh, false, mine);
+            summary.removed += remove_left_out(*store, o, update->dem, true, mine);
         }
         if (o.shard) {
             store->put_document(name,
@@ -1345,17 +1377,7 @@ BuildSummary build_pyramid(const BuildOptions& o, const std::atomic<bool>& stop)
                                                   summary.empty,
                                                   manifest_text(prepared.manifest)));
         } else {
-            store->clean_up(name);
-            // A build of DEM tiles alone has no mesh tiles for a tileset to list.
-            summary.tileset_written =
-                mesh_formats && write_tileset(*layer, *store, name, o.bbox.has_value());
-            if (terrain && wants(o, Format::Terrain)) {
-                write_layer_json(*layer, *store, name, o.terrain_extensions);
-            }
-            if (terrain && wants(o, Format::Terrain3d)) {
-                write_terrain_tileset(*layer, *store, name);
-            }
-            write_static_hosting(o, *layer, *store, name);
+            summary.tileset_written = write_documents(o, *layer, *store, mesh_formats, terrain);
             // Every planned tile is in: a tileset left out only for --bbox does not keep the
             // update pending.
             if (summary.tileset_written || !mesh_formats || o.bbox) {

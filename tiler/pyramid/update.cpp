@@ -560,26 +560,41 @@ bool UpdateTiles::contains(const TileId& id) const {
            });
 }
 
-std::vector<TileId> UpdateTiles::left_out() const {
-    std::set<std::tuple<int, std::int64_t, std::int64_t>> out;
-    for (const auto& [z, ranges] : touched_) {
-        const auto now = now_.find(z);
-        for (const TileRange& r : ranges) {
-            for (const TileRange& piece :
-                 now == now_.end() ? std::vector{r} : minus(r, now->second)) {
-                for (std::int64_t y = piece.y0; y <= piece.y1; ++y) {
-                    for (std::int64_t x = piece.x0; x <= piece.x1; ++x) {
-                        out.insert({z, y, x});
-                    }
-                }
+std::vector<TileRange> UpdateTiles::left_out_at(int z) const {
+    const auto now = now_.find(z);
+    std::vector<TileRange> out;
+    for (const TileRange& r : touched_.at(z)) {
+        for (const TileRange& piece : now == now_.end() ? std::vector{r} : minus(r, now->second)) {
+            if (!piece.empty()) {
+                out.push_back(piece);
             }
         }
     }
-    std::vector<TileId> ids;
-    for (const auto& [z, y, x] : out) {
-        ids.push_back(TileId{z, x, y});
+    return out;
+}
+
+std::int64_t UpdateTiles::left_out_count() const {
+    std::int64_t n = 0;
+    for (const auto& [z, ranges] : touched_) {
+        n += union_area(left_out_at(z));
     }
-    return ids;
+    return n;
+}
+
+void UpdateTiles::for_each_left_out(const std::function<void(const TileId&)>& fn) const {
+    for (const auto& [z, ranges] : touched_) {
+        std::set<std::pair<std::int64_t, std::int64_t>> zoom; // one zoom's at a time
+        for (const TileRange& piece : left_out_at(z)) {
+            for (std::int64_t y = piece.y0; y <= piece.y1; ++y) {
+                for (std::int64_t x = piece.x0; x <= piece.x1; ++x) {
+                    zoom.insert({y, x});
+                }
+            }
+        }
+        for (const auto& [y, x] : zoom) {
+            fn(TileId{z, x, y});
+        }
+    }
 }
 
 std::int64_t UpdateTiles::remade() const {

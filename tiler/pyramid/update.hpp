@@ -22,6 +22,7 @@
 #include "tiler/tile_grid.hpp"
 
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <string>
 #include <vector>
@@ -69,13 +70,18 @@ public:
                 double around);
 
     bool contains(const TileId& id) const;
-    // The tiles this update touches that the new build's ranges leave out, in zoom, row, column
-    // order: they are removed.
-    std::vector<TileId> left_out() const;
+    // How many tiles this update touches that the new build's ranges leave out: they are
+    // removed.
+    std::int64_t left_out_count() const;
+    // Calls fn with each of those, once, in zoom, row, column order.
+    void for_each_left_out(const std::function<void(const TileId&)>& fn) const;
     // How many tiles this update touches within the new build's ranges.
     std::int64_t remade() const;
 
 private:
+    // Zoom z's touched rectangles less the new build's range there (overlapping pieces).
+    std::vector<TileRange> left_out_at(int z) const;
+
     std::map<int, std::vector<TileRange>> touched_; // per zoom, overlapping rectangles
     std::map<int, TileRange> was_, now_;
 };
