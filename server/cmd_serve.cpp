@@ -338,8 +338,9 @@ struct OpenedLayers {
     std::vector<std::vector<std::string>> stamps; // per config layer, taken before opening it
 };
 
-// The config's layers and their stores. A layer whose sources fail to open is logged and answers
-// 503; any other failure (a store), or every layer failing, stops before listening.
+// The config's layers and their stores. A layer whose sources or store fail to open (a store
+// built with other settings, or one whose build --update has not finished) is logged and
+// answers 503 with the reason; every layer failing stops before listening.
 OpenedLayers open_layers(const config::Config& cfg) {
     OpenedLayers opened;
     std::vector<std::string> failures; // logged once the others are known to open
@@ -349,6 +350,7 @@ OpenedLayers open_layers(const config::Config& cfg) {
         server::ServedLayer s;
         try {
             s = server::open_served_layer(layer);
+            server::attach_store(s, layer, opened.stores);
         } catch (const Error& e) {
             failures.push_back("layer " + layer.options.name + " (" +
                                tiler::inputs_text(layer.options.sources) + "): " + e.what());
@@ -358,7 +360,6 @@ OpenedLayers open_layers(const config::Config& cfg) {
             }
             continue;
         }
-        server::attach_store(s, layer, opened.stores);
         log::info("layer " + layer.options.name + ": zooms " + std::to_string(s.layer->min_zoom()) +
                   ".." + std::to_string(s.layer->max_zoom()));
         opened.served.push_back(std::move(s));

@@ -100,3 +100,48 @@ TEST_CASE("serve exits when no layer can be opened, naming the reason") {
     CHECK(out.find("bad2.tif") != std::string::npos); // logged
     CHECK(out.find("serving http") == std::string::npos);
 }
+
+TEST_CASE("a layer whose store holds an unfinished build --update answers 503 naming the way out; "
+          "the others serve") {
+    test::TempDir dir;
+    std::string config = write_config(dir, {});
+    const std::string store = dir / "store";
+    REQUIRE(test::run_to_exit({"build",
+                               dir / "hills.asc",
+                               "-o",
+                               store,
+                               "--layer",
+                               "stale",
+                               "--size",
+                               "64",
+                               "--min-zoom",
+                               "5",
+                               "--max-zoom",
+                               "7",
+                               "--formats",
+                               "glb"},
+                              dir / "build.log") == 0);
+    // What an interrupted update leaves: the record of the build it updates (checksummed like
+    // every document of a directory store).
+    for (const std::string name : {"build-manifest.json", ".build-manifest.json.crc32"}) {
+        const std::string to =
+            name.front() == '.' ? ".build-update.json.crc32" : "build-update.json";
+        test::write_file(store + "/stale/" + to, test::read_file(store + "/stale/" + name));
+    }
+    std::string text = test::read_file(config);
+    text.insert(text.rfind(']'), R"(, {"name": "stale", "sources": ["hills.asc"], "min_zoom": 5,
+                                    "max_zoom": 7, "tile_size": 64, "store": "store"})");
+    test::write_file(config, text);
+
+    test::Child child;
+    const int port = test::start_server(child, {config}, dir / "serve.log");
+    httplib::Client c("127.0.0.1", port);
+    auto stale = c.Get("/stale/tileset.json");
+    REQUIRE(stale);
+    CHECK(stale->status == 503);
+    CHECK(stale->body.find("has not finished") != std::string::npos);
+    CHECK(stale->body.find("--update") != std::string::npos);
+    auto good = c.Get("/good/tileset.json");
+    REQUIRE(good);
+    CHECK(good->status == 200);
+}
