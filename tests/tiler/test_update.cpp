@@ -199,6 +199,11 @@ TEST_CASE("build --update after a DEM is added, replaced or removed equals a ful
         const std::string d =
             write_dem(dir.file("d.tif"), 8.0 - 24 * step, 47.0 + 24 * step, 48, 48, step, 3);
         check_same_as_full({a, c, d}, out, fresh, build(options({a, c, d}, out), true), false);
+        INFO("added e, of another grid, beyond a's east edge");
+        // The data's bounds grow: raster DEM tiles carry a's edge out to them no longer.
+        const std::string e = write_dem(dir.file("e.tif"), 9.1, 46.6, 49, 49, 0.2 / 48, 4);
+        check_same_as_full(
+            {a, c, d, e}, out, fresh, build(options({a, c, d, e}, out), true), false);
         const auto store = TileStore::open(out);
         CHECK_FALSE(store->get_document("terrain", kUpdateRecord));
     }
