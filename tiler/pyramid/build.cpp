@@ -912,6 +912,12 @@ Update plan_update(const Manifest& was, const Manifest& now, const Layer& layer,
         zooms = " (whole zooms: " + zooms_text(scope.zooms) +
                 (scope.dem_zooms.empty() ? "" : "; DEM tiles " + zooms_text(scope.dem_zooms)) + ")";
     }
+    for (std::size_t i = 0; i < scope.why.size() && i < 3; ++i) {
+        log::info("build --update: " + scope.why[i] +
+                  (i == 2 && scope.why.size() > 3
+                       ? " (and " + std::to_string(scope.why.size() - 3) + " more)"
+                       : ""));
+    }
     log::info("build --update: " + changes_text(scope.changes) + "; remaking " +
               std::to_string(u.mesh.remade() + u.dem.remade()) + " tiles" + zooms + ", removing " +
               std::to_string(u.mesh.left_out_count() + u.dem.left_out_count()) +

@@ -147,14 +147,27 @@ signatures(const Manifest& m, const std::string& key, const std::string& which) 
     return out;
 }
 
-// Zooms whose signature differs, or that only one manifest has.
-std::vector<int> changed_zooms(const Manifest& was, const Manifest& now, const std::string& key) {
+// The eps a zoom signature names (its third element), as its text; empty when it has none.
+std::string eps_in(const std::string& signature) {
+    const json s = json::parse(signature, nullptr, false);
+    return s.is_array() && s.size() > 2 && s[2].is_number() ? s[2].dump() : std::string();
+}
+
+// Zooms whose signature differs, or that only one manifest has. A moved eps joins `why`.
+std::vector<int> changed_zooms(const Manifest& was,
+                               const Manifest& now,
+                               const std::string& key,
+                               std::vector<std::string>& why) {
     const std::map<int, std::string> before = signatures(was, key, "last");
     const std::map<int, std::string> after = signatures(now, key, "new");
     std::set<int> out;
     for (const auto& [z, text] : before) {
         if (!after.count(z) || after.at(z) != text) {
             out.insert(z);
+        }
+        if (after.count(z) && eps_in(text) != eps_in(after.at(z))) {
+            why.push_back("zoom " + std::to_string(z) + "'s eps moved from " + eps_in(text) +
+                          " to " + eps_in(after.at(z)) + " m");
         }
     }
     for (const auto& [z, text] : after) {
@@ -301,6 +314,10 @@ void compare_grids(UpdateScope& scope, const Manifest& was, const Manifest& now)
             continue;
         }
         matched[k] = true;
+        if (before[k].box.west != g.box.west || before[k].box.north != g.box.north) {
+            scope.why.push_back("a pixel grid grew or shrank to the north or west, moving the "
+                                "origin every read is placed from");
+        }
         add_difference(scope, before[k].box, g.box);
     }
     for (std::size_t k = 0; k < before.size(); ++k) {
@@ -483,8 +500,8 @@ UpdateScope update_scope(const Manifest& was, const Manifest& now) {
         return scope;
     }
     compare_grids(scope, was, now);
-    scope.zooms = changed_zooms(was, now, "zooms");
-    scope.dem_zooms = changed_zooms(was, now, "dem_zooms");
+    scope.zooms = changed_zooms(was, now, "zooms", scope.why);
+    scope.dem_zooms = changed_zooms(was, now, "dem_zooms", scope.why);
     return scope;
 }
 

@@ -50,6 +50,7 @@ struct UpdateScope {
     std::vector<LonLatBox> boxes;     // the old and the new bounds of every changed DEM
     std::vector<int> zooms;           // mesh and terrain zooms remade whole
     std::vector<int> dem_zooms;       // raster DEM zooms remade whole
+    std::vector<std::string> why;     // why zooms are remade whole, for the log
 };
 
 // Compares the manifest of the last build (`was`) with this run's (`now`). InputError when
