@@ -198,9 +198,9 @@ public:
     // and globe terrain tiles whose quantization left them above it (once per format made).
     virtual std::size_t tiles_over_eps() const = 0;
 
-    // What decides every tile of zoom z beyond the data under it, as one line of JSON: where the
-    // zoom reads its heights (and the origins of the pixel grids its reads are placed from), its
-    // eps and the budgets its mesh and globe terrain tiles are made to. `build --update` remakes a
+    // What decides every tile of zoom z beyond the data under it and the pixel grids' origins,
+    // as one line of JSON: where the zoom reads its heights, its eps and the budgets its mesh
+    // and globe terrain tiles are made to. `build --update` remakes a
     // whole zoom whose line changed (tiler/pyramid/update.hpp).
     virtual std::string zoom_signature(int z) const = 0;
 

@@ -408,9 +408,7 @@ make_manifest(const BuildOptions& o, const Layer& layer, const Plan& plan, int s
     m.emplace_back("source_grids", source_grids_entry(layer));
     m.emplace_back("data_bounds", box_entry(layer.data_bounds()));
     m.emplace_back("zooms", zooms_entry(layer, 0, layer.max_zoom()));
-    const bool dem = std::any_of(o.formats.begin(), o.formats.end(), is_dem_format);
-    const DemTilePlan d = dem_tile_plan(layer);
-    m.emplace_back("dem_zooms", dem ? dem_zooms_entry(layer, d.min_zoom, d.max_zoom) : "[]");
+    m.emplace_back("grid_origins", grid_origins_entry(layer));
     m.emplace_back("mesh_ranges", ranges_entry(plan.ranges_of(false)));
     m.emplace_back("dem_ranges", ranges_entry(plan.ranges_of(true)));
     return m;
@@ -902,15 +900,14 @@ Update plan_update(const Manifest& was, const Manifest& now, const Layer& layer,
                          Scheme::Mercator,
                          parse_ranges(manifest_value(was, "dem_ranges"), "dem_ranges"),
                          plan.ranges_of(true),
-                         scope.dem_zooms,
+                         {}, // raster DEM tiles have no eps or budget: no zoom changes whole
                          dem_around)};
     if (!scope.everything.empty()) {
         log::warn("build --update: " + scope.everything + "; every tile is made again");
     }
     std::string zooms;
-    if (!scope.zooms.empty() || !scope.dem_zooms.empty()) {
-        zooms = " (whole zooms: " + zooms_text(scope.zooms) +
-                (scope.dem_zooms.empty() ? "" : "; DEM tiles " + zooms_text(scope.dem_zooms)) + ")";
+    if (!scope.zooms.empty()) {
+        zooms = " (whole zooms: " + zooms_text(scope.zooms) + ")";
     }
     for (std::size_t i = 0; i < scope.why.size() && i < 3; ++i) {
         log::info("build --update: " + scope.why[i] +

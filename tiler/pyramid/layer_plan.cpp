@@ -132,15 +132,6 @@ std::string LayerPlan::zoom_signature(int z) const {
                       json_number(eps_for_zoom(z)) + ", " + budget(budget_at(z, eps_for_zoom(z))) +
                       ", " + json_number(terrain_eps_for_zoom(z)) + ", " +
                       budget(terrain_budget_at(z, terrain_eps_for_zoom(z)));
-    // Every read of a zoom is placed from a grid's origin, which moves when a mosaic grows west
-    // or north (its extent is compared apart: update.hpp): summary blocks and decimated reads
-    // are cut from it, and a lattice point's or a vertex's place among the pixels is a
-    // difference from it, whose last bits (so a normal's or a bilinear height's) move with it.
-    for (const DemInfo* part : source_.parts()) {
-        const auto& g = part->geotransform;
-        out += ", [" + json_number(g[0]) + ", " + json_number(g[3]) + ", " + json_number(g[1]) +
-               ", " + json_number(g[5]) + "]";
-    }
     // Globe terrain coarser than its data's zooms is flat filler, whose error over the data is
     // the layer's relief.
     if (z < terrain_min_zoom_) {

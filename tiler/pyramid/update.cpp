@@ -28,7 +28,6 @@ const std::set<std::string> kCompared = {"sources",
                                          "zooms",
                                          "dem_min_zoom",
                                          "dem_max_zoom",
-                                         "dem_zooms",
                                          "mesh_ranges",
                                          "dem_ranges",
                                          "shard_count"};
@@ -50,12 +49,6 @@ InputError unparsable(const std::string& which, const std::string& key) {
 
 bool all_numbers(const json& a) {
     return std::all_of(a.begin(), a.end(), [](const json& v) { return v.is_number(); });
-}
-
-std::string grid_text(const DemInfo& part) {
-    const auto& g = part.geotransform;
-    return "[" + json_number(g[0]) + ", " + json_number(g[3]) + ", " + json_number(g[1]) + ", " +
-           json_number(g[5]) + "]";
 }
 
 // The DEMs by path: their stamp (the "sources" entry) and bounds, in the manifest's order.
@@ -314,10 +307,6 @@ void compare_grids(UpdateScope& scope, const Manifest& was, const Manifest& now)
             continue;
         }
         matched[k] = true;
-        if (before[k].box.west != g.box.west || before[k].box.north != g.box.north) {
-            scope.why.push_back("a pixel grid grew or shrank to the north or west, moving the "
-                                "origin every read is placed from");
-        }
         add_difference(scope, before[k].box, g.box);
     }
     for (std::size_t k = 0; k < before.size(); ++k) {
@@ -415,16 +404,12 @@ std::string zooms_entry(const Layer& layer, int from, int to) {
     return out + "]";
 }
 
-std::string dem_zooms_entry(const Layer& layer, int from, int to) {
+std::string grid_origins_entry(const Layer& layer) {
     std::string out = "[";
-    for (int z = from; z <= to; ++z) {
-        out += (z > from ? ", [" : "[") + std::to_string(z);
-        // A raster DEM tile's reads are placed from each grid's origin (blocks of pixels cut
-        // from it, bilinear samples a difference from it), as a mesh zoom's are.
-        for (const DemInfo* part : layer.source().parts()) {
-            out += ", " + grid_text(*part);
-        }
-        out += "]";
+    for (const DemInfo* part : layer.source().parts()) {
+        const auto& g = part->geotransform;
+        out += (out.size() > 1 ? ", [" : "[") + json_number(g[0]) + ", " + json_number(g[3]) +
+               ", " + json_number(g[1]) + ", " + json_number(g[5]) + "]";
     }
     return out + "]";
 }
@@ -491,17 +476,16 @@ std::string changed_setting(const Manifest& was, const Manifest& now) {
 
 UpdateScope update_scope(const Manifest& was, const Manifest& now) {
     UpdateScope scope;
-    scope.everything = changed_setting(was, now);
-    if (!scope.everything.empty()) {
-        return scope;
+    const std::string setting = changed_setting(was, now);
+    compare_dems(scope, was, now); // the DEMs that changed, for the log, whatever else did
+    if (!setting.empty()) {
+        scope.everything = setting;
     }
-    compare_dems(scope, was, now);
     if (!scope.everything.empty()) {
         return scope;
     }
     compare_grids(scope, was, now);
     scope.zooms = changed_zooms(was, now, "zooms", scope.why);
-    scope.dem_zooms = changed_zooms(was, now, "dem_zooms", scope.why);
     return scope;
 }
 

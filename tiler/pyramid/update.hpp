@@ -4,12 +4,13 @@
 //
 // A build manifest (tiler/pyramid/build.hpp) records, beside the tile settings, what an update
 // compares: each DEM's lon/lat bounds ("source_bounds"), each zoom's signature
-// (Layer::zoom_signature: "zooms", "dem_zooms") and the tile ranges the build planned
+// (Layer::zoom_signature: "zooms"), the pixel grids' origins ("grid_origins") and the tile ranges
+// the build planned
 // ("mesh_ranges", "dem_ranges"). From the last build's manifest and this run's:
 //   - every tile, when a setting every tile depends on changed (the Terrabound version, scheme,
-//     tile size, effort, datum, nodata, formats, --bbox, the order of the DEMs, ...);
-//   - every tile of a zoom whose signature changed (its eps, its budget, the origins of the
-//     pixel grids its reads are placed from), or that only one of the two builds has;
+//     tile size, effort, datum, nodata, the order of the DEMs, a grid's origin, ...);
+//   - every tile of a zoom whose signature changed (its eps, its budget), or that only one of
+//     the two builds has;
 //   - the tiles meeting a DEM added, removed or replaced (its old bounds and its new ones), or
 //     the part of a pixel grid (a mosaic) that grew or shrank with it, widened by what a tile
 //     reads around itself (void filling's margin, the borders it shares with its neighbours):
@@ -42,14 +43,19 @@ std::string source_grids_entry(const Layer& layer);
 std::string box_entry(const LonLatBox& box);
 std::string ranges_entry(const std::vector<TileRange>& ranges);
 std::string zooms_entry(const Layer& layer, int from, int to);
-std::string dem_zooms_entry(const Layer& layer, int from, int to);
+// The origin and pixel size of each pixel grid the layer reads ([x0, y0, dx, dy] each). Every
+// read, of mesh and raster DEM tiles alike, is placed from a grid's origin: summary blocks and
+// decimated reads are cut from it, and a lattice point's or a vertex's place among the pixels
+// is a difference from it, whose last bits (so a bilinear height's or a normal's) move with
+// it. The origin moves when a mosaic grows north or west; an update then remakes every tile
+// (the entry is not compared piece by piece).
+std::string grid_origins_entry(const Layer& layer);
 
 struct UpdateScope {
     std::string everything;           // why every tile is remade; empty when only some are
     std::vector<std::string> changes; // "added PATH", "replaced PATH", "removed PATH"
     std::vector<LonLatBox> boxes;     // the old and the new bounds of every changed DEM
     std::vector<int> zooms;           // mesh and terrain zooms remade whole
-    std::vector<int> dem_zooms;       // raster DEM zooms remade whole
     std::vector<std::string> why;     // why zooms are remade whole, for the log
 };
 
