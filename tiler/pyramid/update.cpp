@@ -376,8 +376,7 @@ std::string source_bounds_entry(const std::vector<std::string>& sources) {
         const DemInfo info = inspect_metadata(sources[i]);
         out += i ? ", " : "";
         if (const auto& b = info.lonlat_bounds) {
-            out += "[" + json_number((*b)[0]) + ", " + json_number((*b)[1]) + ", " +
-                   json_number((*b)[2]) + ", " + json_number((*b)[3]) + "]";
+            out += box_entry({(*b)[0], (*b)[1], (*b)[2], (*b)[3]});
         } else {
             out += "null";
         }
