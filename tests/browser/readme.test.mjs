@@ -321,13 +321,20 @@ viewer.camera.setView({ destination: Cesium.Cartesian3.fromDegrees(11.5, 57.5, 1
   },
   deck: {
     detect: (code) => /\bnew TerrainLayer\(/.test(code),
-    packages: ['deck.gl'],
+    packages: ['deck.gl', '@loaders.gl/terrain'],
     head: '<script src="/web/node_modules/deck.gl/dist.min.js"></script>',
     body: '<div id="deck" style="position:absolute;inset:0"></div>',
     // The snippet makes a layer; the page keeps each one made and puts it in a Deck over the
-    // demo DEM.
+    // demo DEM. deck.gl decodes terrain tiles in a loaders.gl worker it fetches from unpkg.com
+    // unless told where it is: this page, which has no internet, gives it web/node_modules' copy.
     before: `const tbLayers = [];
-function TerrainLayer(props) { const layer = new deck.TerrainLayer(props); tbLayers.push(layer); return layer; }`,
+const tbWorkerUrl = new URL('/web/node_modules/@loaders.gl/terrain/dist/terrain-worker.js', location.href).href;
+function TerrainLayer(props) {
+  const loadOptions = { ...props.loadOptions, terrain: { workerUrl: tbWorkerUrl, ...(props.loadOptions || {}).terrain } };
+  const layer = new deck.TerrainLayer({ ...props, loadOptions });
+  tbLayers.push(layer);
+  return layer;
+}`,
     after: `{
   const view = new deck.Deck({ parent: document.getElementById('deck'), controller: false,
     initialViewState: { longitude: 11.6, latitude: 57.4, zoom: 9, pitch: 45, bearing: 0 },
