@@ -103,6 +103,9 @@ std::string describe_zoom(const tiler::Layer& layer, int z) {
         return "full resolution (the DEM's pixels)";
     case tiler::ZoomSource::Summary:
         return "the summary's planes, judged by its blocks";
+    case tiler::ZoomSource::Summaries:
+        return "each DEM's summary where it serves the zoom, judged by its blocks; the other "
+               "DEMs at full resolution";
     case tiler::ZoomSource::Lattice:
         break;
     }

@@ -255,8 +255,9 @@ public:
     }
 
     TileRaster make_raster(const ValidTile& tile) const override;
-    // The zoom's lattice sampled from the source (DemSource::sample), or read off the summary;
-    // either as a tile raster (lattice_tile_raster: the datum applied, voids filled).
+    // The zoom's lattice sampled from the source (DemSource::sample; a collection's members
+    // read off their summaries at its Summaries zooms), or read off the summary; either as a
+    // tile raster (lattice_tile_raster: the datum applied, voids filled).
     TileRaster lattice_raster(const ValidTile& tile) const;
     TileRaster summary_raster(const ValidTile& tile) const;
 
@@ -368,25 +369,40 @@ public:
                 mesh_tile(filled, t.budget, options_.mesh_threads, check_error, options_.effort),
                 false);
         }
+        add_checks(t, tile.z(), from);
+        return t;
+    }
+
+    // What a drawn lattice tile of zoom z (read from `from`) must hold: every block of the
+    // summaries it read, and every valid source pixel under it that no summary stands for.
+    void add_checks(MeshedTile& t, int z, ZoomSource from) const {
         if (from == ZoomSource::Summary) {
-            // Every block of the summary under the tile, as the drawn tile must hold it.
             const int level = summary_level(
-                plan_.summary(), *plan_.pixels(), options_.scheme, tile.z(), options_.tile_size);
+                plan_.summary(), *plan_.pixels(), options_.scheme, z, options_.tile_size);
             t.cells = summary_cells(plan_.summary(), *plan_.pixels(), t.raster, level);
-            return t;
+            return;
         }
-        // Every valid source pixel under the tile, as the drawn tile must hold it.
+        const MemberSummaries* members = from == ZoomSource::Summaries ? plan_.members() : nullptr;
+        if (members != nullptr) {
+            t.cells = members->cells(t.raster, z);
+        }
         // Reserved whole: pages a sparse window never fills are never touched, and the list does
         // not pass through the copies that growing it would make.
-        t.source_pixels.reserve(source_->window_pixels(t.raster.bounds));
+        const LonLatBox& box = t.raster.bounds;
+        t.source_pixels.reserve(members != nullptr ? members->window_pixels(box, z)
+                                                   : source_->window_pixels(box));
         const bool egm96 = plan_.datum() == VerticalDatum::Egm96;
-        source_->pixels_in(t.raster.bounds, [&](const SourcePixel& p) {
+        const auto add = [&](const SourcePixel& p) {
             CheckPoint c;
             lonlat_to_grid(t.raster, {p.lon, p.lat}, c.column, c.row);
             c.height = p.height + (egm96 ? egm96_undulation(p.lon, p.lat) : 0.0);
             t.source_pixels.push_back(c);
-        });
-        return t;
+        };
+        if (members != nullptr) {
+            members->pixels_in(box, z, add);
+        } else {
+            source_->pixels_in(box, add);
+        }
     }
 
     Guarantee guarantee() const override {
@@ -449,6 +465,9 @@ public:
                                        height);
             }
         }
+        if (const MemberSummaries* members = plan_.members()) {
+            return members->sample(scheme, z, size, column0, row0, width, height);
+        }
         return source_->sample(scheme, z, size, column0, row0, width, height);
     }
 
@@ -462,7 +481,8 @@ private:
                               options_.scheme,
                               options_.tile_size,
                               *source_,
-                              pixels ? &*plan_.pixels() : nullptr);
+                              pixels ? &*plan_.pixels() : nullptr,
+                              plan_.lattice_sampler(tile.z()));
     }
 
     // Records a measured tile's published error (tiles at the ladder's eps only: that is the
@@ -508,8 +528,15 @@ TileRaster DemLayer::lattice_raster(const ValidTile& tile) const {
     const int w = n + 1 + 2 * kLatticeFillMargin;
     const std::int64_t c0 = tile_first_column(scheme, tile.id(), n) - kLatticeFillMargin;
     const std::int64_t r0 = tile_first_row(scheme, tile.id(), n) - kLatticeFillMargin;
-    return lattice_tile_raster(
-        tile.id(), source_->sample(scheme, tile.z(), n, c0, r0, w, w), scheme, n, plan_.datum());
+    const MemberSummaries* members =
+        zoom_source(tile.z()) == ZoomSource::Summaries ? plan_.members() : nullptr;
+    return lattice_tile_raster(tile.id(),
+                               members != nullptr
+                                   ? members->sample(scheme, tile.z(), n, c0, r0, w, w)
+                                   : source_->sample(scheme, tile.z(), n, c0, r0, w, w),
+                               scheme,
+                               n,
+                               plan_.datum());
 }
 
 TileRaster DemLayer::summary_raster(const ValidTile& tile) const {
@@ -585,6 +612,8 @@ const char* to_string(ZoomSource source) {
         return "lattice";
     case ZoomSource::Summary:
         return "summary";
+    case ZoomSource::Summaries:
+        return "summaries";
     }
     return "?";
 }

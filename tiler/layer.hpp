@@ -100,6 +100,9 @@ enum class ZoomSource {
     Pixels,  // the source's own pixels, meshed at full resolution (tiler/mesh/pixel_tile.hpp)
     Lattice, // the zoom's lattice sampled from the source, every pixel under the tile checked
     Summary, // the zoom's lattice read off the summary, its blocks checked (tiler/summary/)
+    // A collection's: its members' summaries where they serve the zoom, their blocks checked,
+    // and the other members sampled, every pixel of theirs checked (member_summaries.hpp)
+    Summaries,
 };
 const char* to_string(ZoomSource source);
 

@@ -3,6 +3,7 @@
 // (its tileset geometricError) of the surface a client draws, judged by tests/tiler/
 // source_oracle.hpp, which reads the DEM with GDAL and decodes the tile with Draco itself.
 // Coarse tiles are judged against the full-resolution pixels, as 3D Tiles' geometricError means.
+#include "tests/tiler/qm_judge.hpp"
 #include "tests/tiler/source_oracle.hpp"
 #include "tests/tiler/test_raster_util.hpp"
 #include "tiler/layer.hpp"
@@ -11,6 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include <cmath>
+#include <filesystem>
 #include <map>
 #include <random>
 #include <set>
@@ -38,15 +40,18 @@ void collect(const Layer& layer, const std::string& path, std::map<std::string, 
         stack.pop_back();
         if (tile.contains("content")) {
             const std::string uri = tile["content"]["uri"];
+            // Nested tilesets reach their tiles up the tree ("../../../9/x/y.glb").
+            const std::string at =
+                std::filesystem::path(dir + uri).lexically_normal().generic_string();
             if (uri.ends_with(".json")) {
-                collect(layer, dir + uri, out);
+                collect(layer, at, out);
             } else {
                 Published p;
                 p.error = tile["geometricError"];
                 for (int k = 0; k < 6; ++k) {
                     p.region[static_cast<std::size_t>(k)] = tile["boundingVolume"]["region"][k];
                 }
-                out[dir + uri] = p;
+                out[at] = p;
             }
         }
         if (tile.contains("children")) {
@@ -477,6 +482,60 @@ TEST_CASE("a collection of a UTM survey over geographic SRTM: each keeps its res
 
     static const tb_oracle::Geoid geoid;
     judge_pixels(options, ranked_pixels(fine, coarse, geoid), Guarantee::Measured, false);
+}
+
+TEST_CASE("a collection's coarse zooms read its geographic DEM's summary: globe terrain from "
+          "zoom 0 and 3D Tiles from any zoom draw the data, every winning pixel within the "
+          "published error") {
+    tb_test::ScratchDir dir;
+    std::string coarse, fine;
+    write_collection(dir, coarse, fine);
+    LayerOptions options;
+    options.sources = {coarse, fine};
+    options.min_zoom = 4;
+    const auto layer = Layer::open(options);
+    // The 3" DEM's summary serves the zooms whose lattice step spans 8 of its pixels (6 and
+    // coarser); the survey is read whole.
+    for (int z = 4; z <= 6; ++z) {
+        CAPTURE(z);
+        CHECK(layer->zoom_source(z) == ZoomSource::Summaries);
+    }
+    CHECK(layer->zoom_source(7) == ZoomSource::Lattice);
+
+    static const tb_oracle::Geoid geoid;
+    const auto pixels = ranked_pixels(fine, coarse, geoid);
+    std::map<std::string, Published> published;
+    collect(*layer, "tileset.json", published);
+    for (int z = 4; z <= 7; ++z) {
+        CAPTURE(z);
+        const Summary s = judge_zoom(*layer, pixels, published, z);
+        MESSAGE("3D Tiles zoom " << z << " (" << std::string(to_string(layer->zoom_source(z)))
+                                 << "): " << s.pixels << " pixels, worst " << s.worst
+                                 << " m, worst / published " << s.worst_ratio);
+        CHECK(s.pixels > 0);
+        CHECK(s.worst_ratio <= 1.0);
+    }
+    // Globe terrain over the data is meshed from it at every zoom from 0 (before, zooms coarser
+    // than the collection's were flat filler on the geoid), within its published error.
+    options.min_zoom.reset();
+    const auto natural = Layer::open(options);
+    for (int z = 0; z <= 6; ++z) {
+        CAPTURE(z);
+        const LonLatBox b = DemSource::open({coarse})->footprint();
+        const TileRange r = tiles_covering(Scheme::Geodetic, b, z);
+        REQUIRE(r.count() == 1);
+        const TileId id{z, r.x0, r.y0};
+        const tb_qm::Tile t =
+            tb_qm::read(natural->make_tile(natural->tile(id), Format::Terrain));
+        CHECK(tb_qm::metadata_of(t).find("\"filler\":true") == std::string::npos);
+        if (z >= 3) { // coarser lattices have no sample inside the 0.1 degree DEMs
+            CHECK(t.max_height > 1000); // the data: 1200 .. 1810 m; filler lies within 90 m
+        }
+        const auto [worst, judged] =
+            tb_qm::worst_pixel(t, tile_bounds(Scheme::Geodetic, id), pixels);
+        CHECK(judged == pixels.size());
+        CHECK(worst <= tb_qm::published_error(t) + 1e-3);
+    }
 }
 
 TEST_CASE("a mosaic's gaps between its files are voids, whichever file declares nodata") {

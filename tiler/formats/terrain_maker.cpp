@@ -306,7 +306,8 @@ std::vector<std::array<double, 3>> TerrainMaker::normals(const MeshedTile& t,
                           options_.scheme,
                           options_.tile_size,
                           source_,
-                          pixels ? &*plan_.pixels() : nullptr);
+                          pixels ? &*plan_.pixels() : nullptr,
+                          plan_.lattice_sampler(tile.z()));
 }
 
 } // namespace tb::tiler

@@ -92,20 +92,25 @@ Gradients pixel_gradients(const TileMesh& m,
 }
 
 // Central differences on the zoom's lattice, in the scheme's native units.
-Gradients lattice_gradients(
-    const TileMesh& m, const TileId& id, Scheme scheme, int tile_size, const DemSource& source) {
+Gradients lattice_gradients(const TileMesh& m,
+                            const TileId& id,
+                            Scheme scheme,
+                            int tile_size,
+                            const DemSource& source,
+                            const LatticeSampler& lattice) {
     Gradients d{std::vector<double>(m.vertex_count()), std::vector<double>(m.vertex_count())};
     d.degrees = scheme == Scheme::Geodetic;
     const int n = tile_size;
     const std::int64_t c0 = tile_first_column(scheme, id, n) - 1;
     const std::int64_t r0 = tile_first_row(scheme, id, n) - 1;
     const int w = n + 3;
-    const LatticeBlock block = source.sample(scheme, id.z, n, c0, r0, w, w);
-    TileRaster lattice;
-    lattice.id = id;
-    lattice.scheme = scheme;
-    lattice.size = n;
-    const GridFrame f = frame_of(lattice); // native units, the zoom's lattice
+    const LatticeBlock block = lattice ? lattice(scheme, id.z, n, c0, r0, w, w)
+                                       : source.sample(scheme, id.z, n, c0, r0, w, w);
+    TileRaster raster;
+    raster.id = id;
+    raster.scheme = scheme;
+    raster.size = n;
+    const GridFrame f = frame_of(raster); // native units, the zoom's lattice
     d.step_x = f.dx, d.step_y = f.dy;
     const auto at = [&](int i, int j, double& value) {
         if (i < 0 || j < 0 || i >= w || j >= w) {
@@ -132,7 +137,8 @@ std::vector<std::array<double, 3>> vertex_normals(const TileMesh& m,
                                                   Scheme scheme,
                                                   int tile_size,
                                                   const DemSource& source,
-                                                  const PixelGrid* pixels) {
+                                                  const PixelGrid* pixels,
+                                                  const LatticeSampler& lattice) {
     constexpr double kA = 6378137.0, kE2 = 6.69437999014e-3;
     std::vector<std::array<double, 3>> out(m.vertex_count());
     std::vector<LonLat> ll(m.vertex_count());
@@ -140,7 +146,7 @@ std::vector<std::array<double, 3>> vertex_normals(const TileMesh& m,
         ll[v] = native_to_lonlat(scheme, m.x[v], m.y[v]);
     }
     const Gradients d = pixels ? pixel_gradients(m, ll, id, scheme, source, *pixels)
-                               : lattice_gradients(m, id, scheme, tile_size, source);
+                               : lattice_gradients(m, id, scheme, tile_size, source, lattice);
     for (std::size_t v = 0; v < m.vertex_count(); ++v) {
         const double lon = ll[v].lon * kDeg, lat = ll[v].lat * kDeg;
         const double sl = std::sin(lat), cl = std::cos(lat);

@@ -18,12 +18,14 @@ namespace tb::tiler {
 // differences are taken in the grid's own units (degrees, or EPSG:3857 metres for a
 // mercator grid) and turned into ground slopes with the ellipsoid's radii at the vertex.
 // `pixels`: the source's pixel grid where tile `id`'s zoom reads the source's pixels (its
-// ZoomSource is Pixels), else null (the zoom's lattice of `tile_size`, DemSource::sample).
+// ZoomSource is Pixels), else null (the zoom's lattice of `tile_size`, from `lattice` when given,
+// else DemSource::sample).
 std::vector<std::array<double, 3>> vertex_normals(const TileMesh& mesh,
                                                   const TileId& id,
                                                   Scheme scheme,
                                                   int tile_size,
                                                   const DemSource& source,
-                                                  const PixelGrid* pixels);
+                                                  const PixelGrid* pixels,
+                                                  const LatticeSampler& lattice = {});
 
 } // namespace tb::tiler

@@ -86,6 +86,9 @@ LayerPlan::LayerPlan(const LayerOptions& options, const DemSource& source)
     if (datum_ == VerticalDatum::Auto) {
         datum_ = source_.ellipsoidal_heights() ? VerticalDatum::Ellipsoid : VerticalDatum::Egm96;
     }
+    if (source_.members().size() >= 2) {
+        members_.emplace(options_, source_, datum_);
+    }
     plan_zooms();
     // The default scales with the sample spacing at max_zoom, which is coarser than the
     // source's pixels when max_zoom is set below the native zoom.
@@ -145,7 +148,8 @@ std::string LayerPlan::zoom_signature(int z) const {
 
 ZoomSource LayerPlan::zoom_source(int z) const {
     if (!pixels_) {
-        return ZoomSource::Lattice;
+        return members_ && members_->reads_summaries(z) ? ZoomSource::Summaries
+                                                        : ZoomSource::Lattice;
     }
     // As max_zoom is planned: the first zoom whose lattice is as fine as the pixels.
     if (source_.pixels_per_sample(options_.scheme, z, options_.tile_size) <= 1 + 1e-9) {
@@ -156,6 +160,16 @@ ZoomSource LayerPlan::zoom_source(int z) const {
         return ZoomSource::Summary;
     }
     return ZoomSource::Lattice;
+}
+
+LatticeSampler LayerPlan::lattice_sampler(int z) const {
+    if (zoom_source(z) != ZoomSource::Summaries) {
+        return {};
+    }
+    return
+        [this](Scheme scheme, int zoom, int size, std::int64_t c0, std::int64_t r0, int w, int h) {
+            return members_->sample(scheme, zoom, size, c0, r0, w, h);
+        };
 }
 
 LonLatBox LayerPlan::footprint_at(int z) const {
@@ -236,7 +250,8 @@ const std::vector<double>& LayerPlan::reach() const {
 
 const DemSummary& LayerPlan::summary() const {
     std::call_once(summary_once_, [this] {
-        summary_.emplace(load_or_make_summary(options_, source_, *pixels_, datum_));
+        summary_.emplace(
+            load_or_make_summary(options_, options_.sources, source_, *pixels_, datum_));
     });
     return *summary_;
 }
@@ -264,7 +279,8 @@ void LayerPlan::plan_zooms() {
     // against them), so a zoom whose tiles would hold more than kMaxPixelsPerTile is not
     // offered.
     int coarsest = 0;
-    // Zooms read from the summary read about their own number of samples, whatever the zoom.
+    // Zooms read from the summary read about their own number of samples, whatever the zoom
+    // (a collection's: those of its members that read their summaries).
     while (coarsest <= max_z && zoom_source(coarsest) != ZoomSource::Summary &&
            tile_pixels(coarsest) > kMaxPixelsPerTile) {
         ++coarsest;
@@ -303,9 +319,11 @@ void LayerPlan::plan_zooms() {
                          " scheme's extent");
     }
     min_zoom_ = min_z;
-    // Globe terrain is meshed from the data from zoom 0 where the summary reaches that far
-    // (filler on the geoid below min_zoom otherwise, and where a tile holds no data).
-    terrain_min_zoom_ = summary_ok_ && !options_.min_zoom ? 0 : min_z;
+    // Globe terrain is meshed from the data from zoom 0 where the summary reaches that far, or
+    // a collection's zoom 0 can be read (filler on the geoid below min_zoom otherwise, and where
+    // a tile holds no data).
+    terrain_min_zoom_ =
+        (summary_ok_ || (members_ && coarsest == 0)) && !options_.min_zoom ? 0 : min_z;
     max_zoom_ = max_z;
 }
 
@@ -322,6 +340,9 @@ double LayerPlan::tile_pixels(int z) const {
                                                    lattice_x(options_.scheme, z, 1, 0);
         return std::min<double>(width / pixels_->dx + 1, info.width) *
                std::min<double>(width / pixels_->dy + 1, info.height);
+    }
+    if (members_ && members_->reads_summaries(z)) {
+        return members_->tile_pixels(z);
     }
     return source_.tile_pixels(options_.scheme, z, options_.tile_size);
 }

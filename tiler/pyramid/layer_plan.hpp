@@ -7,6 +7,7 @@
 #include "tiler/layer.hpp"
 #include "tiler/sources/gdal_source.hpp"
 #include "tiler/summary/dem_summary.hpp"
+#include "tiler/summary/member_summaries.hpp"
 #include "tiler/tile_grid.hpp"
 
 #include <mutex>
@@ -74,6 +75,11 @@ public:
     // The source's summary (a pixel-grid source only), made or loaded on first use (once,
     // whichever thread asks first; tiler/summary/layer_summary.hpp).
     const DemSummary& summary() const;
+    // A collection's members' summaries (what its ZoomSource::Summaries zooms read), or null.
+    const MemberSummaries* members() const { return members_ ? &*members_ : nullptr; }
+    // How zoom z's lattice is read beside its tiles (their normals): through the members'
+    // summaries at a Summaries zoom, else empty (DemSource::sample).
+    LatticeSampler lattice_sampler(int z) const;
 
 private:
     void plan_zooms();
@@ -87,6 +93,7 @@ private:
     bool summary_ok_ = false; // the summary serves this scheme's coarse zooms (summary_serves)
     mutable std::once_flag summary_once_;
     mutable std::optional<DemSummary> summary_;
+    std::optional<MemberSummaries> members_; // a collection's
     mutable std::once_flag reach_once_;
     mutable std::vector<double> reach_;
     LonLatBox footprint_;

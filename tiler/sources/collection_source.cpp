@@ -58,6 +58,10 @@ DemInfo describe_members(const std::vector<std::shared_ptr<const DemSource>>& me
         out.outliers += k > 0 ? m.outliers : 0; // the first's are out's already
     }
     out.path = inputs_text(names);
+    out.files.clear();
+    for (const auto& m : members) {
+        out.files.insert(out.files.end(), m->info().files.begin(), m->info().files.end());
+    }
     // Between members lie voids, filled as nodata is.
     out.nodata = first.nodata.value_or(-32768.0);
     out.likely_nodata.reset();
@@ -89,6 +93,7 @@ public:
         }
         return out;
     }
+    std::vector<std::shared_ptr<const DemSource>> members() const override { return members_; }
     bool georeferenced() const override { return true; }
     LonLatBox footprint() const override { return footprint_; }
     bool ellipsoidal_heights() const override { return members_.front()->ellipsoidal_heights(); }

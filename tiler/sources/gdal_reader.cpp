@@ -957,6 +957,7 @@ std::shared_ptr<const DemSource> open_mosaic(const std::vector<std::string>& pat
     const std::string open_name = xml[0];
     DemInfo info = inspect_dem(open_name, kExactRangeSamples, nodata, range);
     info.path = names;
+    info.files = paths;
     check_likely_nodata(info);
     warn_outliers(info);
     return std::make_shared<GdalDemSource>(open_name, std::move(info));
@@ -972,6 +973,7 @@ std::shared_ptr<const DemSource> group_source(const std::vector<std::string>& fi
         return open_mosaic(files, infos, nodata, range);
     }
     DemInfo info = inspect_dem(files[0], kExactRangeSamples, nodata, range);
+    info.files = files;
     check_likely_nodata(info);
     warn_outliers(info);
     return std::make_shared<GdalDemSource>(files[0], std::move(info));
@@ -1044,6 +1046,7 @@ std::shared_ptr<const DemSource> DemSource::open(const std::vector<std::string>&
         srs.push_back(ds->GetSpatialRef() ? *ds->GetSpatialRef() : OGRSpatialReference());
     }
     if (paths.size() == 1) {
+        infos[0].files = paths;
         return std::make_shared<GdalDemSource>(paths[0], infos[0]);
     }
     for (std::size_t k = 0; k < paths.size(); ++k) {

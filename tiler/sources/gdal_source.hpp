@@ -33,7 +33,8 @@ ValidRange parse_valid_range(const std::string& text, const std::string& what);
 
 struct DemInfo {
     std::string path;
-    std::string driver; // GDAL short name: GTiff, SRTMHGT, DTED, AAIGrid, ...
+    std::vector<std::string> files; // the files read: one, or a mosaic's (empty: not opened)
+    std::string driver;             // GDAL short name: GTiff, SRTMHGT, DTED, AAIGrid, ...
     int width = 0, height = 0, bands = 0;
     std::string data_type;   // Int16, UInt16, Int32, Float32, ...
     std::string crs_name;    // "WGS 84", "" when the file has none
@@ -267,12 +268,25 @@ public:
     virtual LonLatBox footprint_at(Scheme, int /*z*/, int /*size*/) const { return footprint(); }
     // The DEMs it reads: itself, or each member of a collection (collection_source.hpp).
     virtual std::vector<const DemInfo*> parts() const { return {&info()}; }
+    // A collection's members, ranked (the first wins where they overlap); empty for one DEM or
+    // one mosaic.
+    virtual std::vector<std::shared_ptr<const DemSource>> members() const { return {}; }
 
     // The whole band 1 at full resolution, row 0 = first raster row, nodata marked invalid and
     // filled (fill_voids, margin 0). Needs no georeferencing. Throws InputError when every
     // sample is nodata or above 400 Mpixel.
     virtual core::HeightGrid read_all() const = 0;
 };
+
+// A function giving what DemSource::sample gives (a collection's zoom read through its members'
+// summaries, say).
+using LatticeSampler = std::function<LatticeBlock(Scheme scheme,
+                                                  int z,
+                                                  int size,
+                                                  std::int64_t column0,
+                                                  std::int64_t row0,
+                                                  int width,
+                                                  int height)>;
 
 // The most source pixels one tile reads at full resolution (2048 x 2048). Every zoom meshes or
 // checks the full-resolution pixels under a tile, so zooms whose tiles would hold more are not

@@ -10,18 +10,18 @@
 namespace tb::tiler {
 
 DemSummary load_or_make_summary(const LayerOptions& options,
+                                const std::vector<std::string>& files,
                                 const DemSource& source,
                                 const PixelGrid& pixels,
                                 VerticalDatum datum) {
     const auto dir =
         summary_dir_for(options.summary_dir, std::int64_t{pixels.width} * pixels.height);
     const auto key =
-        dir ? summary_key(options.sources, options.nodata, datum, pixels, options.valid_range)
-            : std::nullopt;
+        dir ? summary_key(files, options.nodata, datum, pixels, options.valid_range) : std::nullopt;
     if (!key) {
         return DemSummary::build(source, pixels, datum);
     }
-    const auto path = summary_path(*dir, options.sources.front(), *key);
+    const auto path = summary_path(*dir, files.front(), *key);
     if (auto kept = load_summary(path, *key)) {
         return std::move(*kept);
     }

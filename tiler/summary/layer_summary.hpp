@@ -7,9 +7,10 @@
 namespace tb::tiler {
 
 // The summary of a pixel-grid source kept on disk for this source and these settings
-// (options.summary_dir, sources, nodata; datum: the layer's, resolved), else made, and kept
-// where options.summary_dir allows. Throws like DemSummary::build.
+// (options.summary_dir, nodata; `files`: the source's files; datum: the layer's, resolved),
+// else made, and kept where options.summary_dir allows. Throws like DemSummary::build.
 DemSummary load_or_make_summary(const LayerOptions& options,
+                                const std::vector<std::string>& files,
                                 const DemSource& source,
                                 const PixelGrid& pixels,
                                 VerticalDatum datum);
