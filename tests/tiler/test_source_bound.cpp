@@ -525,8 +525,7 @@ TEST_CASE("a collection's coarse zooms read its geographic DEM's summary: globe 
         const TileRange r = tiles_covering(Scheme::Geodetic, b, z);
         REQUIRE(r.count() == 1);
         const TileId id{z, r.x0, r.y0};
-        const tb_qm::Tile t =
-            tb_qm::read(natural->make_tile(natural->tile(id), Format::Terrain));
+        const tb_qm::Tile t = tb_qm::read(natural->make_tile(natural->tile(id), Format::Terrain));
         CHECK(tb_qm::metadata_of(t).find("\"filler\":true") == std::string::npos);
         if (z >= 3) { // coarser lattices have no sample inside the 0.1 degree DEMs
             CHECK(t.max_height > 1000); // the data: 1200 .. 1810 m; filler lies within 90 m
