@@ -189,6 +189,12 @@ void init_gdal() {
         CPLSetErrorHandler(quiet_error_handler);
         // Statistics must come from the data: never write .aux.xml next to a user's DEM.
         CPLSetConfigOption("GDAL_PAM_ENABLED", "NO");
+        // GDAL lists a file's whole directory on every open, to find sidecars: in a directory
+        // of 10,000 DEMs that is 10,000 listings of 10,000 names, half the time to open them.
+        // TRUE looks for each sidecar (.ovr) by name instead.
+        if (CPLGetConfigOption("GDAL_DISABLE_READDIR_ON_OPEN", nullptr) == nullptr) {
+            CPLSetConfigOption("GDAL_DISABLE_READDIR_ON_OPEN", "TRUE");
+        }
         if (CPLGetConfigOption("GDAL_CACHEMAX", nullptr) == nullptr) {
             GDALSetCacheMax64(static_cast<GIntBig>(kDefaultBlockCacheMb) << 20);
         }
