@@ -5,6 +5,7 @@
 #include "tiler/sources/gdal_source.hpp"
 #include "tiler/sources/source_list.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <optional>
@@ -12,6 +13,9 @@
 
 namespace tb::cli {
 namespace {
+
+// Collections of more files than this are described as a whole unless --each is given.
+constexpr std::size_t kDescribedFiles = 8;
 
 std::string describe(const tiler::DemInfo& d) {
     std::ostringstream out;
@@ -116,17 +120,29 @@ std::string describe_zoom(const tiler::Layer& layer, int z) {
            ", checked at full resolution";
 }
 
-// How the DEMs of a collection rank: the first with a valid pixel wins at each point.
+// A collection's groups and how they rank: the first with a valid pixel wins at each point.
 std::string describe_ranks(const tiler::DemSource& source, tiler::SourcePriority priority) {
     std::ostringstream out;
     out.precision(6);
     const auto parts = source.parts();
-    out << "collection of " << parts.size() << " DEM groups, ranked " << to_string(priority)
-        << " (where they overlap the first with data wins; the others fill its voids):\n";
+    std::size_t files = 0;
+    for (const auto& part : parts) {
+        files += std::max<std::size_t>(part->files.size(), 1);
+    }
+    out << "collection of " << files << (files == 1 ? " file" : " files") << " in " << parts.size()
+        << (parts.size() == 1 ? " DEM group" : " DEM groups");
+    if (parts.size() > 1) {
+        out << ", ranked " << to_string(priority)
+            << " (where they overlap the first with data wins; the others fill its voids)";
+    }
+    out << ":\n";
     for (std::size_t k = 0; k < parts.size(); ++k) {
         const tiler::DemInfo& d = *parts[k];
-        out << "  " << k + 1 << ". " << d.path << ": " << d.resolution_m << " m pixels, "
-            << (d.crs_id.empty() ? d.crs_name : d.crs_id);
+        out << "  " << k + 1 << ". " << d.path << ": ";
+        if (d.files.size() > 1) {
+            out << d.files.size() << " files, ";
+        }
+        out << d.resolution_m << " m pixels, " << (d.crs_id.empty() ? d.crs_name : d.crs_id);
         if (d.lonlat_bounds) {
             const auto& b = *d.lonlat_bounds;
             out << ", lon " << b[0] << " .. " << b[2] << ", lat " << b[1] << " .. " << b[3];
@@ -148,7 +164,7 @@ std::string describe_pyramid(const tiler::LayerOptions& options) {
         out << "  pyramid:     none (" << e.what() << ")\n";
         return out.str();
     }
-    if (layer->source().parts().size() > 1) {
+    if (options.sources.size() > 1) {
         out << describe_ranks(layer->source(), options.priority);
     }
     const auto& o = layer->options();
@@ -209,7 +225,13 @@ int run(const Args& args) {
         options.priority = tiler::parse_source_priority(*v, "info: --priority");
     }
     const std::vector<std::string> paths = tiler::expand_dem_inputs(args.positional);
-    for (const auto& path : paths) {
+    const bool each = paths.size() <= kDescribedFiles || args.has("each");
+    if (!each) {
+        std::printf("%zu DEM files, the first %s (each described with --each)\n",
+                    paths.size(),
+                    paths.front().c_str());
+    }
+    for (const auto& path : each ? paths : std::vector<std::string>{}) {
         std::fputs(
             describe(tiler::inspect_dem(path, tiler::kExactRangeSamples, nodata, range)).c_str(),
             stdout);
@@ -232,12 +254,14 @@ const Command& info_command() {
         {"info",
          "DEM...",
          "Describe a DEM: size, CRS, data type, nodata, height range, resolution, pyramid;\n"
-         "several DEMs: each of them, then how they rank and the pyramid of them together.",
+         "several DEMs: each of them (up to 8, or --each), then their groups (files of one\n"
+         "CRS and pixel size), how the groups rank, and the pyramid of them together.",
          {{"scheme", "NAME", "pyramid plan for geodetic (default) or mercator tiles"},
           {"nodata", "V", "raw sample value to treat as nodata, replacing the file's own"},
           {"summary-dir", "DIR", kSummaryDirHelp},
           {"valid-range", "MIN,MAX", kValidRangeHelp},
-          {"priority", "finest|listed", kPriorityHelp}},
+          {"priority", "finest|listed", kPriorityHelp},
+          {"each", "", "describe every file of a collection of more than 8 (default: the whole)"}},
          "The pyramid plan is what 'terrabound build' and 'serve' make of the DEM alone with\n"
          "default options: zoom range, tiles per zoom, each zoom's eps (metres), how that eps\n"
          "is made true at the DEM's own pixels (the guarantee), and what its tiles read: the\n"

@@ -247,7 +247,7 @@ TEST_CASE("a collection given as a directory or a list file: info ranks its DEMs
 
     Run r = run(dir, "info " + dems);
     REQUIRE_MESSAGE(r.code == 0, r.err);
-    CHECK(r.out.find("collection of 2 DEM groups, ranked finest") != std::string::npos);
+    CHECK(r.out.find("collection of 2 files in 2 DEM groups, ranked finest") != std::string::npos);
     const auto first = r.out.find("  1. " + dems + "/survey/block.tif: 10 m pixels, EPSG:32632");
     const auto second = r.out.find("  2. " + dems + "/srtm.tif");
     CHECK(first != std::string::npos);
@@ -272,4 +272,47 @@ TEST_CASE("a collection given as a directory or a list file: info ranks its DEMs
     r = run(dir, "info " + dir.file("nothing") + "/*.tif");
     CHECK(r.code == 2);
     CHECK(r.err.find("matches no file") != std::string::npos);
+}
+
+TEST_CASE("info describes a collection of many files as a whole, and each file with --each") {
+    ScratchDir dir;
+    // Twelve 20 x 20 pieces of one 3" grid: one DEM group of twelve files.
+    const std::string dems = dir.file("pieces");
+    std::filesystem::create_directories(dems);
+    for (int j = 0; j < 3; ++j) {
+        for (int i = 0; i < 4; ++i) {
+            Fixture piece;
+            piece.width = 20, piece.height = 20;
+            piece.type = GDT_Int16;
+            piece.epsg = 4326;
+            piece.geotransform = std::array<double, 6>{
+                7.6 + i * 20.0 / 1200, 1.0 / 1200, 0, 46.4 - j * 20.0 / 1200, 0, -1.0 / 1200};
+            for (int k = 0; k < 400; ++k) {
+                piece.values.push_back(800 + i * 20 + k % 20 + j * 20 + k / 20);
+            }
+            tb_test::write_fixture(dems + "/p" + std::to_string(j) + std::to_string(i) + ".tif",
+                                   piece);
+        }
+    }
+    auto count = [](const std::string& text, const std::string& what) {
+        int n = 0;
+        for (auto at = text.find(what); at != std::string::npos; at = text.find(what, at + 1)) {
+            ++n;
+        }
+        return n;
+    };
+    Run r = run(dir, "info " + dems);
+    REQUIRE_MESSAGE(r.code == 0, r.err);
+    CHECK(r.out.find("12 DEM files, the first " + dems + "/p00.tif (each described with --each)") !=
+          std::string::npos);
+    CHECK(r.out.find("collection of 12 files in 1 DEM group:") != std::string::npos);
+    CHECK(r.out.find(": 12 files, ") != std::string::npos);
+    CHECK(r.out.find("EPSG:4326, lon 7.6") != std::string::npos);
+    CHECK(count(r.out, "  format:") == 0);
+    CHECK(r.out.find("  pyramid:") != std::string::npos);
+
+    r = run(dir, "info --each " + dems);
+    REQUIRE_MESSAGE(r.code == 0, r.err);
+    CHECK(count(r.out, "  format:      GTiff") == 12);
+    CHECK(r.out.find("collection of 12 files in 1 DEM group:") != std::string::npos);
 }
