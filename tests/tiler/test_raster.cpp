@@ -8,6 +8,8 @@
 #include "tiler/sources/gdal_source.hpp"
 #include "tiler/sources/geoid.hpp"
 
+#include <cpl_string.h>
+#include <cpl_vsi.h>
 #include <doctest/doctest.h>
 #include <gdal_utils.h>
 
@@ -844,9 +846,16 @@ TEST_CASE("overviews in an external .ovr file and a mosaic's implicit overviews 
         std::vector<std::string> paths;
         int width, height;
     };
+    // A mosaic's VRT is a file in GDAL's memory file system while its source lives, no longer.
+    const auto memory_files = [] {
+        const CPLStringList names(VSIReadDir("/vsimem/terrabound"));
+        return names.size();
+    };
+    const int memory_files_before = memory_files();
     for (const Case& c : {Case{{external}, 256, 256}, Case{{west, east}, 512, 256}}) {
         INFO(c.paths.size() << " file(s)");
         const auto source = DemSource::open(c.paths);
+        CHECK(memory_files() == memory_files_before + (c.paths.size() > 1 ? 1 : 0));
         // Zoom 9: 8 pixels per sample, so the factor-4 overview read every 2nd pixel.
         const ReadLevel level = source->read_level(Scheme::Geodetic, 9, 256);
         CHECK(level.overview == 1);
@@ -863,6 +872,7 @@ TEST_CASE("overviews in an external .ovr file and a mosaic's implicit overviews 
         }
         CHECK(valid > 100 * static_cast<int>(c.paths.size()));
     }
+    CHECK(memory_files() == memory_files_before);
 }
 
 TEST_CASE(
