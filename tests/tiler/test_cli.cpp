@@ -26,9 +26,11 @@ std::string slurp(const std::string& path) {
     return s.str();
 }
 
-Run run(const ScratchDir& dir, const std::string& arguments) {
+// Runs `terrabound ARGUMENTS` in the current directory, or in `cwd` when given.
+Run run(const ScratchDir& dir, const std::string& arguments, const std::string& cwd = "") {
     const std::string out = dir.file("stdout.txt"), err = dir.file("stderr.txt");
-    const std::string command = std::string(TB_BINARY) + " " + arguments + " >" + out + " 2>" + err;
+    const std::string command = (cwd.empty() ? "" : "cd '" + cwd + "' && ") +
+                                std::string(TB_BINARY) + " " + arguments + " >" + out + " 2>" + err;
     const int status = std::system(command.c_str());
     Run r;
     r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
@@ -315,4 +317,12 @@ TEST_CASE("info describes a collection of many files as a whole, and each file w
     REQUIRE_MESSAGE(r.code == 0, r.err);
     CHECK(count(r.out, "  format:      GTiff") == 12);
     CHECK(r.out.find("collection of 12 files in 1 DEM group:") != std::string::npos);
+
+    // Named relative to the current directory: the mosaic reads the same files.
+    r = run(dir, "info pieces", dir.file(""));
+    REQUIRE_MESSAGE(r.code == 0, r.err);
+    CHECK(r.out.find("collection of 12 files in 1 DEM group:") != std::string::npos);
+    CHECK(r.out.find("  1. pieces/p00.tif, pieces/p01.tif, pieces/p02.tif and 9 more: 12 files") !=
+          std::string::npos);
+    CHECK(r.out.find("  pyramid:     geodetic") != std::string::npos);
 }

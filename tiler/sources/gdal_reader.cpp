@@ -969,9 +969,14 @@ std::shared_ptr<const DemSource> open_mosaic(const std::vector<std::string>& pat
     argv.reset(CSLAddString(argv.release(), value));
     std::unique_ptr<GDALBuildVRTOptions, BuildVrtOptionsDeleter> options(
         GDALBuildVRTOptionsNew(argv.get(), nullptr));
-    std::vector<const char*> sources;
+    // Absolute: the VRT lives in /vsimem/, and GDAL reads names relative to where it lives.
+    std::vector<std::string> absolute;
     for (auto p = paths.rbegin(); p != paths.rend(); ++p) {
-        sources.push_back(p->c_str());
+        absolute.push_back(p->starts_with("/vsi") ? *p : std::filesystem::absolute(*p).string());
+    }
+    std::vector<const char*> sources;
+    for (const auto& p : absolute) {
+        sources.push_back(p.c_str());
     }
     int usage_error = 0;
     CPLErrorReset();
