@@ -14,6 +14,7 @@ namespace tb::server {
 ServedLayer open_served_layer(const config::LayerConfig& layer) {
     ServedLayer served;
     served.layer = tiler::Layer::open(layer.options);
+    served.layer->prepare(); // its summaries made or loaded now, not by its first tiles
     served.formats = layer.formats;
     return served;
 }

@@ -124,6 +124,7 @@ public:
               }) {}
 
     const LayerOptions& options() const override { return options_; }
+    void prepare() const override { plan_.prepare(); }
     int min_zoom() const override { return plan_.min_zoom(); }
     int max_zoom() const override { return plan_.max_zoom(); }
     double eps_for_zoom(int z) const override { return plan_.eps_for_zoom(z); }

@@ -137,6 +137,9 @@ public:
     static std::shared_ptr<const Layer> open(const LayerOptions& options);
 
     virtual const LayerOptions& options() const = 0;
+    // Loads or makes now what tiles read on first use (the multi-resolution summaries, each
+    // zoom's reach), so that no request waits for them: serve calls it before serving a layer.
+    virtual void prepare() const = 0;
     virtual int min_zoom() const = 0;
     virtual int max_zoom() const = 0;
     virtual double eps_for_zoom(int z) const = 0; // the ladder: finest * 2^(max_zoom - z)

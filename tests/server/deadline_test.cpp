@@ -47,6 +47,7 @@ public:
     }
 
     const tiler::LayerOptions& options() const override { return inner_->options(); }
+    void prepare() const override { inner_->prepare(); }
     int min_zoom() const override { return inner_->min_zoom(); }
     int max_zoom() const override { return inner_->max_zoom(); }
     double eps_for_zoom(int z) const override { return inner_->eps_for_zoom(z); }

@@ -89,7 +89,7 @@ struct Serving {
 } // namespace
 
 TEST_CASE("on SIGHUP a replaced source is served anew: the new layer's bytes, a new ETag, and "
-          "no old tile left in the store") {
+          "no old tile left in the store; its summary is made before it serves") {
     Serving s(0);
     CHECK(s.first == fresh_tile(s.dir));
     replace_source(s.dir, 193);
@@ -105,6 +105,14 @@ TEST_CASE("on SIGHUP a replaced source is served anew: the new layer's bytes, a 
     CHECK(after->body == expected);
     CHECK(after->get_header_value("ETag") != s.etag);
     CHECK(s.log().find("reload: layer hills now serves its new sources") != std::string::npos);
+    // The layer's summary was made before it served, at start and again on reload: no tile
+    // request waited for it.
+    const std::string log = s.log();
+    const auto made = log.find("summary ready");
+    const auto remade = log.find("summary ready", made + 1);
+    CHECK(made < log.find("serving http://"));
+    CHECK(log.find("reload: layer hills: its sources changed") < remade);
+    CHECK(remade < log.find("reload: layer hills now serves its new sources"));
     // /layers describes the new layer too (its bounds follow the smaller DEM).
     httplib::Client c("127.0.0.1", s.port);
     const auto listed = c.Get("/layers");

@@ -519,6 +519,7 @@ TEST_CASE("a collection's coarse zooms read its geographic DEM's summary: globe 
     // than the collection's were flat filler on the geoid), within its published error.
     options.min_zoom.reset();
     const auto natural = Layer::open(options);
+    natural->prepare(); // the 3" DEM's summary made now (as serve does), then read by the tiles
     for (int z = 0; z <= 6; ++z) {
         CAPTURE(z);
         const LonLatBox b = DemSource::open({coarse})->footprint();

@@ -248,6 +248,15 @@ const std::vector<double>& LayerPlan::reach() const {
     return reach_;
 }
 
+void LayerPlan::prepare() const {
+    if (summary_ok_) {
+        reach(); // and the summary it reads
+    }
+    if (members_) {
+        members_->prepare(std::min(min_zoom_, terrain_min_zoom_), max_zoom_);
+    }
+}
+
 const DemSummary& LayerPlan::summary() const {
     std::call_once(summary_once_, [this] {
         summary_.emplace(

@@ -81,6 +81,10 @@ public:
     // summaries at a Summaries zoom, else empty (DemSource::sample).
     LatticeSampler lattice_sampler(int z) const;
 
+    // Loads or makes now what the first tiles would otherwise wait for: the summary and the
+    // zooms' reach, and each member's summary.
+    void prepare() const;
+
 private:
     void plan_zooms();
     double tile_pixels(int z) const;

@@ -60,6 +60,17 @@ bool MemberSummaries::reads_summary(std::size_t m, int z) const {
                                 std::exp2(kFinestLevel);
 }
 
+void MemberSummaries::prepare(int z0, int z1) const {
+    for (std::size_t m = 0; m < members_.size(); ++m) {
+        for (int z = z0; z <= z1; ++z) {
+            if (reads_summary(m, z)) {
+                summary(*members_[m]);
+                break;
+            }
+        }
+    }
+}
+
 bool MemberSummaries::reads_summaries(int z) const {
     for (std::size_t m = 0; m < members_.size(); ++m) {
         if (reads_summary(m, z)) {

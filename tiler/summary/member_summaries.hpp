@@ -58,6 +58,9 @@ public:
     void pixels_in(const LonLatBox& box, int z, const DemSource::PixelVisitor& visit) const;
     std::size_t window_pixels(const LonLatBox& box, int z) const;
 
+    // Loads or makes now the summary of every member that a zoom of z0..z1 reads.
+    void prepare(int z0, int z1) const;
+
 private:
     struct Member {
         std::shared_ptr<const DemSource> source;
