@@ -279,6 +279,24 @@ TEST_CASE("a sharded update and --finalize equal a sharded full build; the earli
     });
 }
 
+TEST_CASE("an update remakes every tile when a grid's summary changes its finest level") {
+    // A grid past about 537 Mpixel reads its summary from a coarser finest level, whose every
+    // block differs; no test can write such a grid, so the manifests are compared directly.
+    ScratchDir dir;
+    const std::string a = write_dem(dir.file("a.tif"), 8.0, 47.0, 193, 193, 0.8 / 192, 0);
+    build(options({a}, dir.file("out")));
+    const Manifest was = parse_manifest(slurp(dir.file("out/terrain/") + kBuildManifest));
+    CHECK(manifest_value(was, "summary_levels") == "[3]");
+    CHECK(update_scope(was, was).everything.empty());
+    Manifest now = was;
+    for (auto& [key, value] : now) {
+        if (key == "summary_levels") {
+            value = "[4]";
+        }
+    }
+    CHECK(update_scope(was, now).everything == "summary_levels changed (was [3], now [4])");
+}
+
 TEST_CASE("--update refuses what it cannot update, naming the way out") {
     ScratchDir dir;
     const std::string a = write_dem(dir.file("a.tif"), 8.0, 47.0, 193, 193, 0.8 / 192, 0);

@@ -409,6 +409,7 @@ make_manifest(const BuildOptions& o, const Layer& layer, const Plan& plan, int s
     m.emplace_back("data_bounds", box_entry(layer.data_bounds()));
     m.emplace_back("zooms", zooms_entry(layer, 0, layer.max_zoom()));
     m.emplace_back("grid_origins", grid_origins_entry(layer));
+    m.emplace_back("summary_levels", summary_levels_entry(layer));
     m.emplace_back("mesh_ranges", ranges_entry(plan.ranges_of(false)));
     m.emplace_back("dem_ranges", ranges_entry(plan.ranges_of(true)));
     return m;

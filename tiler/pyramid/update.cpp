@@ -4,6 +4,7 @@
 #include "core/error.hpp"
 #include "tiler/json_number.hpp"
 #include "tiler/sources/gdal_source.hpp"
+#include "tiler/summary/dem_summary.hpp"
 
 #include <nlohmann/json.hpp>
 
@@ -409,6 +410,15 @@ std::string grid_origins_entry(const Layer& layer) {
         const auto& g = part->geotransform;
         out += (out.size() > 1 ? ", [" : "[") + json_number(g[0]) + ", " + json_number(g[3]) +
                ", " + json_number(g[1]) + ", " + json_number(g[5]) + "]";
+    }
+    return out + "]";
+}
+
+std::string summary_levels_entry(const Layer& layer) {
+    std::string out = "[";
+    for (const DemInfo* part : layer.source().parts()) {
+        out += (out.size() > 1 ? ", " : "") +
+               std::to_string(summary_finest_level(part->width, part->height));
     }
     return out + "]";
 }

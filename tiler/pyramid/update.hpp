@@ -8,7 +8,8 @@
 // the build planned
 // ("mesh_ranges", "dem_ranges"). From the last build's manifest and this run's:
 //   - every tile, when a setting every tile depends on changed (the Terrabound version, scheme,
-//     tile size, effort, datum, nodata, the order of the DEMs, a grid's origin, ...);
+//     tile size, effort, datum, nodata, the order of the DEMs, a grid's origin, the finest level
+//     of a grid's summary, ...);
 //   - every tile of a zoom whose signature changed (its eps, its budget), or that only one of
 //     the two builds has;
 //   - the tiles meeting a DEM added, removed or replaced (its old bounds and its new ones), or
@@ -50,6 +51,10 @@ std::string zooms_entry(const Layer& layer, int from, int to);
 // it. The origin moves when a mosaic grows north or west; an update then remakes every tile
 // (the entry is not compared piece by piece).
 std::string grid_origins_entry(const Layer& layer);
+// The finest level of each pixel grid's summary (summary_finest_level): it rises a level as a
+// grid grows past about 537 Mpixel, and then every block of the summary changes, so every tile
+// read from it. Not compared piece by piece either.
+std::string summary_levels_entry(const Layer& layer);
 
 struct UpdateScope {
     std::string everything;           // why every tile is remade; empty when only some are
