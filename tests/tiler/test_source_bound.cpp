@@ -538,6 +538,54 @@ TEST_CASE("a collection's coarse zooms read its geographic DEM's summary: globe 
     }
 }
 
+TEST_CASE("two geographic DEMs that both read their summaries: where the finer has a void the "
+          "coarser wins, and every winning pixel is within the published error at every zoom") {
+    tb_test::ScratchDir dir;
+    std::string coarse, unused;
+    write_collection(dir, coarse, unused);
+    // A 1" DEM over part of the 3" one, 2 to 10 m above it, with a round void the 3" DEM fills.
+    tb_test::Fixture f;
+    f.width = f.height = 180;
+    f.type = GDT_Float32;
+    f.epsg = 4326;
+    f.nodata = -9999;
+    f.geotransform = std::array<double, 6>{7.63, 1.0 / 3600, 0, 46.37, 0, -1.0 / 3600};
+    for (int j = 0; j < f.height; ++j) {
+        for (int i = 0; i < f.width; ++i) {
+            const double lon = 7.63 + (i + 0.5) / 3600, lat = 46.37 - (j + 0.5) / 3600;
+            const bool hole = std::hypot(i - 90, j - 90) < 40;
+            f.values.push_back(hole ? -9999
+                                    : coarse_height(lon, lat) + 6 +
+                                          4 * std::sin(i / 7.0) * std::cos(j / 5.0));
+        }
+    }
+    const std::string fine = tb_test::write_fixture(dir.file("fine_1s.tif"), f);
+    LayerOptions options;
+    options.sources = {coarse, fine};
+    options.min_zoom = 4;
+    const auto layer = Layer::open(options);
+    layer->prepare();
+    // Both DEMs' summaries serve zooms 4..6 (a lattice step spans 8 pixels of each or more),
+    // the 1" DEM's alone 7 and 8.
+    for (int z = 4; z <= 8; ++z) {
+        CAPTURE(z);
+        CHECK(layer->zoom_source(z) == ZoomSource::Summaries);
+    }
+    static const tb_oracle::Geoid geoid;
+    const auto pixels = ranked_pixels(fine, coarse, geoid);
+    std::map<std::string, Published> published;
+    collect(*layer, "tileset.json", published);
+    for (int z = 4; z <= layer->max_zoom(); ++z) {
+        CAPTURE(z);
+        const Summary s = judge_zoom(*layer, pixels, published, z);
+        MESSAGE("zoom " << z << " (" << std::string(to_string(layer->zoom_source(z)))
+                        << "): " << s.pixels << " pixels, worst " << s.worst
+                        << " m, worst / published " << s.worst_ratio);
+        CHECK(s.pixels > 0);
+        CHECK(s.worst_ratio <= 1.0);
+    }
+}
+
 TEST_CASE("a mosaic's gaps between its files are voids, whichever file declares nodata") {
     tb_test::ScratchDir dir;
     // Two 3" cells of one grid with a gap of 0.05 degrees between them; only one declares nodata.
