@@ -175,13 +175,27 @@ ZoomSource LayerPlan::zoom_source(int z) const {
 }
 
 LatticeSampler LayerPlan::lattice_sampler(int z) const {
-    if (zoom_source(z) != ZoomSource::Summaries) {
-        return {};
+    switch (zoom_source(z)) {
+    case ZoomSource::Summary:
+        return
+            [this](
+                Scheme scheme, int zoom, int size, std::int64_t c0, std::int64_t r0, int w, int h) {
+                const DemSummary& sum = summary();
+                const int level = summary_level(sum, *pixels_, scheme, zoom, size);
+                return summary_lattice(
+                    sum, *pixels_, datum_, scheme, zoom, size, level, c0, r0, w, h);
+            };
+    case ZoomSource::Summaries:
+        return
+            [this](
+                Scheme scheme, int zoom, int size, std::int64_t c0, std::int64_t r0, int w, int h) {
+                return members_->sample(scheme, zoom, size, c0, r0, w, h);
+            };
+    case ZoomSource::Pixels:
+    case ZoomSource::Lattice:
+        break;
     }
-    return
-        [this](Scheme scheme, int zoom, int size, std::int64_t c0, std::int64_t r0, int w, int h) {
-            return members_->sample(scheme, zoom, size, c0, r0, w, h);
-        };
+    return {};
 }
 
 LonLatBox LayerPlan::footprint_at(int z) const {

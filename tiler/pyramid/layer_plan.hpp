@@ -77,8 +77,9 @@ public:
     const DemSummary& summary() const;
     // A collection's members' summaries (what its ZoomSource::Summaries zooms read), or null.
     const MemberSummaries* members() const { return members_ ? &*members_ : nullptr; }
-    // How zoom z's lattice is read beside its tiles (their normals): through the members'
-    // summaries at a Summaries zoom, else empty (DemSource::sample).
+    // How zoom z's lattice is read beside its tiles (their normals): off the summary's planes at
+    // a Summary zoom and the members' summaries at a Summaries zoom, the surface those tiles are
+    // meshed from (a coarse tile reads no pixel of the DEM), else empty (DemSource::sample).
     LatticeSampler lattice_sampler(int z) const;
 
     // Loads or makes now what the first tiles would otherwise wait for: the summary and the
