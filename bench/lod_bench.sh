@@ -32,13 +32,7 @@ cd "$RUNS"
 DEM=${DEM:-$RUNS/N48W125-x4.tif}
 SMALL=$DATA/N44W072.hgt
 
-if [[ ! -s $DEM ]]; then
-    cd "$(dirname "$DEM")"
-    unzip -o -q "$DATA/N48W125.hgt.zip" N48W125.hgt
-    gdal_translate -q -outsize 400% 400% -r cubic -ot Int16 -co TILED=YES -co COMPRESS=DEFLATE \
-        N48W125.hgt "$(basename "$DEM")"
-    cd "$RUNS"
-fi
+DATA=$DATA "$HERE/x4_dem.sh" "$DEM"
 MPX=$(python3 -c "print(14404 * 14404 / 1e6)")
 
 late() { [[ $DEADLINE -gt 0 && $(date +%s) -ge $DEADLINE ]]; }
