@@ -11,6 +11,7 @@
 #include <doctest/doctest.h>
 #include <nlohmann/json.hpp>
 
+#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <map>
@@ -584,6 +585,55 @@ TEST_CASE("two geographic DEMs that both read their summaries: where the finer h
         CHECK(s.pixels > 0);
         CHECK(s.worst_ratio <= 1.0);
     }
+}
+
+TEST_CASE("a collection member's summary kept on disk is made again when its file changes, never "
+          "read stale") {
+    tb_test::ScratchDir dir;
+    std::string coarse, fine;
+    write_collection(dir, coarse, fine);
+    LayerOptions options;
+    options.sources = {coarse, fine};
+    options.min_zoom = 4;
+    options.summary_dir = dir.file("summaries");
+    // Zoom 6's lattice point nearest 7.615 E 46.385 N: in the 3" DEM, north of the survey.
+    const auto height = [&] {
+        const auto layer = Layer::open(options);
+        layer->prepare();
+        REQUIRE(layer->zoom_source(6) == ZoomSource::Summaries);
+        const double step = 180.0 / 64 / 256;
+        const LatticeBlock b = layer->sample(Scheme::Geodetic,
+                                             6,
+                                             256,
+                                             std::llround((7.615 + 180) / step),
+                                             std::llround((90 - 46.385) / step),
+                                             1,
+                                             1);
+        REQUIRE(b.valid[0]);
+        return b.heights[0];
+    };
+    const double before = height();
+    REQUIRE(!std::filesystem::is_empty(dir.file("summaries")));
+    CHECK(height() == before); // the summary read back from disk
+    // The 3" DEM raised 500 m in place: the same size, a later time.
+    {
+        GDALDatasetUniquePtr ds(GDALDataset::Open(coarse.c_str(), GDAL_OF_RASTER | GDAL_OF_UPDATE));
+        REQUIRE(ds != nullptr);
+        GDALRasterBand* band = ds->GetRasterBand(1);
+        const int w = band->GetXSize(), h = band->GetYSize();
+        std::vector<double> v(static_cast<std::size_t>(w) * h);
+        REQUIRE(band->RasterIO(GF_Read, 0, 0, w, h, v.data(), w, h, GDT_Float64, 0, 0, nullptr) ==
+                CE_None);
+        for (double& x : v) {
+            x += 500;
+        }
+        REQUIRE(band->RasterIO(GF_Write, 0, 0, w, h, v.data(), w, h, GDT_Float64, 0, 0, nullptr) ==
+                CE_None);
+    }
+    std::filesystem::last_write_time(
+        coarse, std::filesystem::last_write_time(coarse) + std::chrono::seconds(2));
+    const double after = height();
+    CHECK(after - before == doctest::Approx(500).epsilon(1e-3));
 }
 
 TEST_CASE("a mosaic's gaps between its files are voids, whichever file declares nodata") {
