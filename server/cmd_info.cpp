@@ -231,19 +231,13 @@ int run(const Args& args) {
                     paths.size(),
                     paths.front().c_str());
     }
-    for (const auto& path : each ? paths : std::vector<std::string>{}) {
-        std::fputs(
-            describe(tiler::inspect_dem(path, tiler::kExactRangeSamples, nodata, range)).c_str(),
-            stdout);
-        if (paths.size() == 1) {
-            options.sources = {path};
-            std::fputs(describe_pyramid(options).c_str(), stdout);
-        }
+    for (std::size_t k = 0; each && k < paths.size(); ++k) {
+        std::fputs(describe(tiler::inspect_dem(paths[k], tiler::kExactRangeSamples, nodata, range))
+                       .c_str(),
+                   stdout);
     }
-    if (paths.size() > 1) { // one collection: one pyramid
-        options.sources = paths;
-        std::fputs(describe_pyramid(options).c_str(), stdout);
-    }
+    options.sources = paths; // one DEM or one collection: one pyramid
+    std::fputs(describe_pyramid(options).c_str(), stdout);
     return 0;
 }
 

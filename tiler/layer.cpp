@@ -546,15 +546,11 @@ TileRaster DemLayer::summary_raster(const ValidTile& tile) const {
     const int w = n + 1 + 2 * kLatticeFillMargin;
     const std::int64_t c0 = tile_first_column(scheme, tile.id(), n) - kLatticeFillMargin;
     const std::int64_t r0 = tile_first_row(scheme, tile.id(), n) - kLatticeFillMargin;
-    const DemSummary& sum = plan_.summary();
-    const int level = summary_level(sum, *plan_.pixels(), scheme, tile.z(), n);
-    return lattice_tile_raster(
-        tile.id(),
-        summary_lattice(
-            sum, *plan_.pixels(), plan_.datum(), scheme, tile.z(), n, level, c0, r0, w, w),
-        scheme,
-        n,
-        plan_.datum());
+    return lattice_tile_raster(tile.id(),
+                               plan_.summary_sample(scheme, tile.z(), n, c0, r0, w, w),
+                               scheme,
+                               n,
+                               plan_.datum());
 }
 
 } // namespace

@@ -180,10 +180,7 @@ LatticeSampler LayerPlan::lattice_sampler(int z) const {
         return
             [this](
                 Scheme scheme, int zoom, int size, std::int64_t c0, std::int64_t r0, int w, int h) {
-                const DemSummary& sum = summary();
-                const int level = summary_level(sum, *pixels_, scheme, zoom, size);
-                return summary_lattice(
-                    sum, *pixels_, datum_, scheme, zoom, size, level, c0, r0, w, h);
+                return summary_sample(scheme, zoom, size, c0, r0, w, h);
             };
     case ZoomSource::Summaries:
         return
@@ -196,6 +193,19 @@ LatticeSampler LayerPlan::lattice_sampler(int z) const {
         break;
     }
     return {};
+}
+
+LatticeBlock LayerPlan::summary_sample(Scheme scheme,
+                                       int z,
+                                       int size,
+                                       std::int64_t column0,
+                                       std::int64_t row0,
+                                       int width,
+                                       int height) const {
+    const DemSummary& sum = summary();
+    const int level = summary_level(sum, *pixels_, scheme, z, size);
+    return summary_lattice(
+        sum, *pixels_, datum_, scheme, z, size, level, column0, row0, width, height);
 }
 
 LonLatBox LayerPlan::footprint_at(int z) const {

@@ -75,6 +75,15 @@ public:
     // The source's summary (a pixel-grid source only), made or loaded on first use (once,
     // whichever thread asks first; tiler/summary/layer_summary.hpp).
     const DemSummary& summary() const;
+    // The lattice points (column0 + i, row0 + j) of (scheme, z, size) off the summary's planes at
+    // the zoom's level (summary_lattice): what a Summary zoom's tiles are meshed from.
+    LatticeBlock summary_sample(Scheme scheme,
+                                int z,
+                                int size,
+                                std::int64_t column0,
+                                std::int64_t row0,
+                                int width,
+                                int height) const;
     // A collection's members' summaries (what its ZoomSource::Summaries zooms read), or null.
     const MemberSummaries* members() const { return members_ ? &*members_ : nullptr; }
     // How zoom z's lattice is read beside its tiles (their normals): off the summary's planes at
