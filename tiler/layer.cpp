@@ -256,11 +256,11 @@ public:
     }
 
     TileRaster make_raster(const ValidTile& tile) const override;
-    // The zoom's lattice sampled from the source (DemSource::sample; a collection's members
-    // read off their summaries at its Summaries zooms), or read off the summary; either as a
-    // tile raster (lattice_tile_raster: the datum applied, voids filled).
+    // The zoom's lattice as a tile raster (lattice_tile_raster: the datum applied, the data's
+    // edge carried outward, voids filled), read as LayerPlan::lattice_sampler says: off the
+    // summary at Summary zooms, a collection's members' summaries at Summaries zooms, else
+    // DemSource::sample.
     TileRaster lattice_raster(const ValidTile& tile) const;
-    TileRaster summary_raster(const ValidTile& tile) const;
 
     std::string make_tile_at(const ValidTile& tile, Format format, double eps) const override {
         if (is_terrain_format(format)) {
@@ -355,7 +355,7 @@ public:
             }
             return t;
         }
-        t.raster = from == ZoomSource::Summary ? summary_raster(tile) : lattice_raster(tile);
+        t.raster = lattice_raster(tile);
         checkpoint(tile.id(), "meshing");
         if (drop_voids) {
             t.mesh = to_tile_mesh(
@@ -519,8 +519,7 @@ private:
 
 TileRaster DemLayer::make_raster(const ValidTile& tile) const {
     plan_.check_data(tile);
-    return zoom_source(tile.z()) == ZoomSource::Summary ? summary_raster(tile)
-                                                        : lattice_raster(tile);
+    return lattice_raster(tile);
 }
 
 TileRaster DemLayer::lattice_raster(const ValidTile& tile) const {
@@ -529,28 +528,13 @@ TileRaster DemLayer::lattice_raster(const ValidTile& tile) const {
     const int w = n + 1 + 2 * kLatticeFillMargin;
     const std::int64_t c0 = tile_first_column(scheme, tile.id(), n) - kLatticeFillMargin;
     const std::int64_t r0 = tile_first_row(scheme, tile.id(), n) - kLatticeFillMargin;
-    const MemberSummaries* members =
-        zoom_source(tile.z()) == ZoomSource::Summaries ? plan_.members() : nullptr;
+    const LatticeSampler sample = sampler_or_source(plan_.lattice_sampler(tile.z()), *source_);
     return lattice_tile_raster(tile.id(),
-                               members != nullptr
-                                   ? members->sample(scheme, tile.z(), n, c0, r0, w, w)
-                                   : source_->sample(scheme, tile.z(), n, c0, r0, w, w),
+                               sample(scheme, tile.z(), n, c0, r0, w, w),
                                scheme,
                                n,
-                               plan_.datum());
-}
-
-TileRaster DemLayer::summary_raster(const ValidTile& tile) const {
-    const Scheme scheme = options_.scheme;
-    const int n = options_.tile_size;
-    const int w = n + 1 + 2 * kLatticeFillMargin;
-    const std::int64_t c0 = tile_first_column(scheme, tile.id(), n) - kLatticeFillMargin;
-    const std::int64_t r0 = tile_first_row(scheme, tile.id(), n) - kLatticeFillMargin;
-    return lattice_tile_raster(tile.id(),
-                               plan_.summary_sample(scheme, tile.z(), n, c0, r0, w, w),
-                               scheme,
-                               n,
-                               plan_.datum());
+                               plan_.datum(),
+                               lattice_footprint(scheme, tile.z(), n, plan_.footprint(), sample));
 }
 
 } // namespace

@@ -3,10 +3,12 @@
 // coarse zooms read from overviews (which level, their values, shared samples, `info`).
 #include "core/error.hpp"
 #include "core/triangulate.hpp"
+#include "tests/tiler/qm_reader.hpp"
 #include "tests/tiler/test_raster_util.hpp"
 #include "tiler/layer.hpp"
 #include "tiler/sources/gdal_source.hpp"
 #include "tiler/sources/geoid.hpp"
+#include "tiler/sources/lattice_raster.hpp"
 
 #include <cpl_string.h>
 #include <cpl_vsi.h>
@@ -176,6 +178,19 @@ template <class F> int for_each_inside(const LatticeBlock& block, int z, F f) {
 }
 
 // The tile of zoom z containing the fixture's centre.
+// Metres between two points a few kilometres apart (an equirectangular approximation).
+double metres_between(const LonLat& a, const LonLat& b) {
+    const double c = std::cos((a.lat + b.lat) * M_PI / 360.0);
+    return std::hypot((a.lon - b.lon) * c * 111320.0, (a.lat - b.lat) * 110574.0);
+}
+
+// A 1,000 m plateau of 0.2 x 0.2 degrees (200 x 200 pixels) from (lon0, lat0), its north-west
+// corner, written under `dir`.
+std::string write_plateau(const ScratchDir& dir, double lon0, double lat0) {
+    const Fixture f = geographic(200, 200, lon0, lat0, std::vector<double>(200 * 200, 1000.0));
+    return tb_test::write_fixture(dir.file("plateau.tif"), f);
+}
+
 TileId centre_tile(int z) {
     const double lon = kLon0 + kSide * kPixel / 2, lat = kLat0 - kSide * kPixel / 2;
     const double width = 180.0 / (1 << z); // geodetic tiles are square, y counted from the south
@@ -593,6 +608,125 @@ TEST_CASE("tiles with voids on their shared border fill it identically (N46E008.
         previous = std::move(next);
     }
     CHECK(borders_with_voids > 0);
+}
+
+TEST_CASE("beyond the DEM's footprint, lattice tiles carry its edge outward on a gentle slope") {
+    // A plateau across the corner of four zoom-9 tiles (lon 10.1953, lat 45.7031). Its edge
+    // carried outward and lowered at kEdgeGrade reaches sea level 2 km out;
+    // a cliff would drop 1,000 m between two samples.
+    ScratchDir dir;
+    LayerOptions options;
+    options.sources = {write_plateau(dir, 10.1, 45.8)};
+    options.min_zoom = 5;
+    const auto layer = Layer::open(options);
+    const LonLatBox box = layer->data_bounds(); // its pixel centres
+    const auto metres = metres_between;
+    const auto ortho = [](const TileRaster& r, int i, int j) {
+        const LonLat p = grid_to_lonlat(r, i, j);
+        return r.grid.at(i, j) - egm96_undulation(p.lon, p.lat);
+    };
+    for (const int z : {7, 9}) {
+        CAPTURE(z);
+        REQUIRE(layer->zoom_source(z) != ZoomSource::Pixels);
+        const TileRange range = tiles_covering(Scheme::Geodetic, box, z);
+        int outside = 0, far = 0, steep = 0;
+        for (std::int64_t y = range.y0; y <= range.y1; ++y) {
+            for (std::int64_t x = range.x0; x <= range.x1; ++x) {
+                const TileRaster r = layer->make_raster(layer->tile({z, x, y}));
+                // The edge is carried from the lattice points inside the box of the outermost
+                // pixel centres, but samples up to half a pixel beyond it are the DEM's own: next
+                // to those, the slope may start up to a diagonal lattice step further out.
+                const double slack = metres(grid_to_lonlat(r, 0, 0), grid_to_lonlat(r, 1, 1));
+                for (int j = 0; j <= r.size; ++j) {
+                    for (int i = 0; i <= r.size; ++i) {
+                        const LonLat p = grid_to_lonlat(r, i, j);
+                        const LonLat q{std::clamp(p.lon, box.west, box.east),
+                                       std::clamp(p.lat, box.south, box.north)};
+                        if ((q.lon == p.lon && q.lat == p.lat) || r.grid.is_valid(i, j)) {
+                            continue; // inside the box of pixel centres, or measured
+                        }
+                        ++outside;
+                        const double h = ortho(r, i, j);
+                        CHECK(h >= -0.01);
+                        CHECK(h <= 1000.01);
+                        if (metres(p, q) > 1000.0 / kEdgeGrade * 1.02 + 1000.0) {
+                            ++far;
+                            CHECK(std::abs(h) < 0.01); // sea level, no plateau invented
+                        }
+                        // Against the next sample east and south: no steeper than the grade.
+                        for (const auto& [di, dj] : {std::pair{1, 0}, std::pair{0, 1}}) {
+                            if (i + di <= r.size && j + dj <= r.size) {
+                                const double run = metres(p, grid_to_lonlat(r, i + di, j + dj));
+                                const double rise = std::abs(ortho(r, i + di, j + dj) - h);
+                                steep += rise > kEdgeGrade * (run + slack) * 1.02 + 0.01;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        CHECK(outside > 0);
+        CHECK(far > 0);
+        CHECK(steep == 0);
+    }
+    // The four zoom-9 tiles around the corner agree on their shared borders, carried samples
+    // included.
+    const TileRange r9 = tiles_covering(Scheme::Geodetic, box, 9);
+    REQUIRE(r9.x1 == r9.x0 + 1);
+    REQUIRE(r9.y1 == r9.y0 + 1);
+    const auto raster = [&](std::int64_t x, std::int64_t y) {
+        return layer->make_raster(layer->tile({9, x, y}));
+    };
+    check_shared_border(raster(r9.x0, r9.y0), raster(r9.x1, r9.y0), true);
+    check_shared_border(raster(r9.x0, r9.y0), raster(r9.x0, r9.y1), false);
+    check_shared_border(raster(r9.x1, r9.y0), raster(r9.x1, r9.y1), false);
+}
+
+TEST_CASE("globe terrain tiles at the pixel zoom carry the DEM's edge to their corners beyond it") {
+    // Tiles meshed off the pixels end at the DEM's outline; cover_rectangle joins it to the
+    // tile's corners, which take the lattice's carried height (sea level 2 km out), not the
+    // geoid next to a 1,000 m edge. The plateau's north-east pixel centre lies 0.0003 degrees
+    // west and 0.0049 south of a zoom-10 tile corner (lon 10.9453, lat 45.8789).
+    ScratchDir dir;
+    LayerOptions options;
+    options.sources = {write_plateau(dir, 10.7455, 45.8745)};
+    const auto layer = Layer::open(options);
+    const int z = layer->max_zoom();
+    REQUIRE(layer->zoom_source(z) == ZoomSource::Pixels);
+    const LonLatBox box = layer->data_bounds(); // its pixel centres
+    const TileRange range = tiles_covering(Scheme::Geodetic, box, z);
+    int corners = 0, carried = 0;
+    for (std::int64_t y = range.y0; y <= range.y1; ++y) {
+        for (std::int64_t x = range.x0; x <= range.x1; ++x) {
+            const TileId id{z, x, y};
+            const tb_qm::Tile t = tb_qm::read(layer->make_tile(layer->tile(id), Format::Terrain));
+            const LonLatBox b = tile_bounds(Scheme::Geodetic, id);
+            // A diagonal lattice step: the carried height starts from the lattice point
+            // nearest the box, up to that far inside it.
+            const double step = (b.east - b.west) / 256;
+            const double slack = metres_between({b.west, b.south}, {b.west + step, b.south + step});
+            for (std::size_t i = 0; i < t.vertex_count; ++i) {
+                if ((t.u[i] != 0 && t.u[i] != 32767) || (t.v[i] != 0 && t.v[i] != 32767)) {
+                    continue;
+                }
+                const LonLat p{t.lon(i, b.west, b.east), t.lat(i, b.south, b.north)};
+                const LonLat q{std::clamp(p.lon, box.west, box.east),
+                               std::clamp(p.lat, box.south, box.north)};
+                if (q.lon == p.lon && q.lat == p.lat) {
+                    continue; // a corner over the data
+                }
+                ++corners;
+                const double ortho = t.height(i) - egm96_undulation(p.lon, p.lat);
+                const double d = metres_between(p, q);
+                const double expected = std::max(0.0, 1000.0 - kEdgeGrade * d);
+                CHECK(ortho <= expected + 0.1);
+                CHECK(ortho >= std::max(0.0, 1000.0 - kEdgeGrade * (d + slack)) - 0.1);
+                carried += expected > 0 ? 1 : 0;
+            }
+        }
+    }
+    MESSAGE(corners << " tile corners beyond the DEM, " << carried << " within 2 km of it");
+    CHECK(carried > 0);
 }
 
 TEST_CASE("each zoom reads the coarsest overview no coarser than its samples, then decimates") {

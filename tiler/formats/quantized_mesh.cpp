@@ -1046,7 +1046,9 @@ TileMesh terrain_filler(const LonLatBox& b) {
     return m;
 }
 
-void cover_rectangle(TileMesh& m, const LonLatBox& b) {
+void cover_rectangle(TileMesh& m,
+                     const LonLatBox& b,
+                     const std::function<double(double lon, double lat)>& corner_height) {
     if (m.vertex_count() == 0) {
         return;
     }
@@ -1056,8 +1058,9 @@ void cover_rectangle(TileMesh& m, const LonLatBox& b) {
     if (ix0 == b.west && ix1 == b.east && iy0 == b.south && iy1 == b.north) {
         return;
     }
-    const auto corner = [&m](double x, double y) {
-        return m.add(x, y, static_cast<float>(egm96_undulation(x, y)), true);
+    const auto corner = [&](double x, double y) {
+        const double h = corner_height ? corner_height(x, y) : std::nan("");
+        return m.add(x, y, static_cast<float>(std::isnan(h) ? egm96_undulation(x, y) : h), true);
     };
     // Outer corners counter-clockwise from south-west, and the inner sides in the same order.
     const core::Index outer[4] = {corner(b.west, b.south),

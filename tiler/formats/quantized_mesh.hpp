@@ -187,9 +187,12 @@ std::string terrain_metadata(const TerrainSpec& spec, const TileId& id, double e
 TileMesh terrain_filler(const LonLatBox& bounds);
 
 // Adds triangles covering the part of `bounds` outside the mesh's vertex extent (a tile at the
-// edge of the source), from the mesh's outline to the rectangle's corners, which lie on the
-// geoid. The mesh must cover its own extent (a rectangle).
-void cover_rectangle(TileMesh& mesh, const LonLatBox& bounds);
+// edge of the source), from the mesh's outline to the rectangle's corners. A corner takes
+// corner_height(lon, lat) (ellipsoidal metres), or lies on the geoid where that is NaN or
+// not given. The mesh must cover its own extent (a rectangle).
+void cover_rectangle(TileMesh& mesh,
+                     const LonLatBox& bounds,
+                     const std::function<double(double lon, double lat)>& corner_height = {});
 
 // The water mask of a tile raster: 255 where the nearest sample is a void or at or below sea
 // level (EGM96, within 1 cm), else 0; a single byte when the whole tile is one or the other.

@@ -4,6 +4,7 @@
 #include "core/error.hpp"
 #include "tiler/log.hpp"
 #include "tiler/mesh/vertex_normals.hpp"
+#include "tiler/sources/lattice_raster.hpp"
 
 #include <algorithm>
 #include <array>
@@ -215,7 +216,7 @@ TerrainDraft TerrainMaker::data_terrain(const ValidTile& tile, const LonLatBox& 
     if (t.mesh.triangle_count() == 0) {
         throw NotFound("tile " + tile_name(tile.id()) + ": no triangle from the DEM"); // filler
     }
-    cover_rectangle(t.mesh, bounds);
+    cover_rectangle(t.mesh, bounds, carried_corners(tile));
     TerrainTile& terrain = draft.tile;
     std::size_t uncovered = 0;
     double error = 0;
@@ -296,6 +297,22 @@ double TerrainMaker::filler_error(const ValidTile& tile) const {
     const bool over_data = b.west < plan_.footprint().east && b.east > plan_.footprint().west &&
                            b.south < plan_.footprint().north && b.north > plan_.footprint().south;
     return over_data ? plan_.relief() : 0.0;
+}
+
+std::function<double(double, double)> TerrainMaker::carried_corners(const ValidTile& tile) const {
+    const int z = tile.z(), n = options_.tile_size;
+    LatticeFootprint fp = lattice_footprint(Scheme::Geodetic,
+                                            z,
+                                            n,
+                                            plan_.footprint(),
+                                            sampler_or_source(plan_.lattice_sampler(z), source_));
+    const double step = lattice_x(Scheme::Geodetic, z, n, 1) - lattice_x(Scheme::Geodetic, z, n, 0);
+    return [this, z, n, step, fp = std::move(fp)](double lon, double lat) {
+        // A tile corner is a lattice point: its column and row, exactly.
+        const auto column = std::llround((lon - lattice_x(Scheme::Geodetic, z, n, 0)) / step);
+        const auto row = std::llround((lattice_y(Scheme::Geodetic, z, n, 0) - lat) / step);
+        return carried_height(Scheme::Geodetic, z, n, column, row, fp, plan_.datum());
+    };
 }
 
 std::vector<std::array<double, 3>> TerrainMaker::normals(const MeshedTile& t,

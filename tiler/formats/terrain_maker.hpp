@@ -67,6 +67,9 @@ private:
     // tile holds no source pixel.
     double filler_error(const ValidTile& tile) const;
     std::vector<std::array<double, 3>> normals(const MeshedTile& t, const ValidTile& tile) const;
+    // The heights of a pixel tile's corners beyond the DEM (cover_rectangle): the zoom's
+    // lattice carried outward from the data's edge, as lattice tiles carry it.
+    std::function<double(double, double)> carried_corners(const ValidTile& tile) const;
 
     const LayerOptions& options_;
     const LayerPlan& plan_;
