@@ -256,11 +256,12 @@ public:
     }
 
     TileRaster make_raster(const ValidTile& tile) const override;
-    // The zoom's lattice as a tile raster (lattice_tile_raster: the datum applied, the data's
-    // edge carried outward, voids filled), read as LayerPlan::lattice_sampler says: off the
-    // summary at Summary zooms, a collection's members' summaries at Summaries zooms, else
-    // DemSource::sample.
-    TileRaster lattice_raster(const ValidTile& tile) const;
+    TileRaster make_terrain_raster(const ValidTile& tile) const override;
+    // The zoom's lattice as a tile raster (lattice_tile_raster: the datum applied, voids filled,
+    // with `carry_edge` the data's edge carried outward), read as LayerPlan::lattice_sampler
+    // says: off the summary at Summary zooms, a collection's members' summaries at Summaries
+    // zooms, else DemSource::sample.
+    TileRaster lattice_raster(const ValidTile& tile, bool carry_edge) const;
 
     std::string make_tile_at(const ValidTile& tile, Format format, double eps) const override {
         if (is_terrain_format(format)) {
@@ -355,7 +356,7 @@ public:
             }
             return t;
         }
-        t.raster = lattice_raster(tile);
+        t.raster = lattice_raster(tile, !drop_voids);
         checkpoint(tile.id(), "meshing");
         if (drop_voids) {
             t.mesh = to_tile_mesh(
@@ -519,22 +520,29 @@ private:
 
 TileRaster DemLayer::make_raster(const ValidTile& tile) const {
     plan_.check_data(tile);
-    return lattice_raster(tile);
+    return lattice_raster(tile, false);
 }
 
-TileRaster DemLayer::lattice_raster(const ValidTile& tile) const {
+TileRaster DemLayer::make_terrain_raster(const ValidTile& tile) const {
+    plan_.check_data(tile);
+    return lattice_raster(tile, true);
+}
+
+TileRaster DemLayer::lattice_raster(const ValidTile& tile, bool carry_edge) const {
     const Scheme scheme = options_.scheme;
     const int n = options_.tile_size;
     const int w = n + 1 + 2 * kLatticeFillMargin;
     const std::int64_t c0 = tile_first_column(scheme, tile.id(), n) - kLatticeFillMargin;
     const std::int64_t r0 = tile_first_row(scheme, tile.id(), n) - kLatticeFillMargin;
     const LatticeSampler sample = sampler_or_source(plan_.lattice_sampler(tile.z()), *source_);
+    const LatticeFootprint footprint =
+        lattice_footprint(scheme, tile.z(), n, plan_.footprint(), sample);
     return lattice_tile_raster(tile.id(),
                                sample(scheme, tile.z(), n, c0, r0, w, w),
                                scheme,
                                n,
                                plan_.datum(),
-                               lattice_footprint(scheme, tile.z(), n, plan_.footprint(), sample));
+                               carry_edge ? &footprint : nullptr);
 }
 
 } // namespace

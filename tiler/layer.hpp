@@ -184,6 +184,9 @@ public:
     // (see fill_voids in tiler/gdal_source.hpp; a tile with no data near it lies at 0 m
     // orthometric, i.e. on the geoid). Same errors as make_tile.
     virtual TileRaster make_raster(const ValidTile& tile) const = 0;
+    // The raster globe terrain is meshed from at a zoom meshed off the lattice: make_raster's,
+    // with the data's edge carried outward past the footprint (lattice_tile_raster).
+    virtual TileRaster make_terrain_raster(const ValidTile& tile) const = 0;
     // The encoded tile at an explicit published eps (metres, >= 0.001): raster, then
     // core::triangulate at error_budget(eps).mesh_eps with locked borders, then encode_tile with
     // the vertex normals of the DEM's slope (those of the terrain tiles' octvertexnormals).

@@ -69,6 +69,9 @@ public:
     tiler::TileRaster make_raster(const tiler::ValidTile& tile) const override {
         return inner_->make_raster(tile);
     }
+    tiler::TileRaster make_terrain_raster(const tiler::ValidTile& tile) const override {
+        return inner_->make_terrain_raster(tile);
+    }
     std::string
     make_tile_at(const tiler::ValidTile& tile, tiler::Format format, double eps) const override {
         return inner_->make_tile_at(tile, format, eps);

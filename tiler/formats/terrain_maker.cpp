@@ -113,7 +113,9 @@ TerrainSpec TerrainMaker::terrain_spec() const {
 
 // What the terrain tileset publishes. Heights: every tile's vertices lie within the
 // layer's range or on the geoid (filler, and the corners covering a rectangle beyond the
-// DEM), whose undulation stays within kGeoidLowest..kGeoidHighest. Level errors: a tile at a
+// DEM where no edge is carried to them), whose undulation stays within
+// kGeoidLowest..kGeoidHighest, or between the two (the edge carried outward, lowered toward
+// the geoid). Level errors: a tile at a
 // meshed zoom is held to its zoom's bound (data_terrain measures what its glb draws); a filler
 // tile over the data is as far from it as the DEM's heights are from the geoid.
 TerrainTilesetSpec TerrainMaker::tileset_spec() const {

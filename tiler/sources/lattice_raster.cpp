@@ -1,10 +1,11 @@
 // Tile rasters from the zoom's lattice (lattice_raster.hpp).
 #include "tiler/sources/lattice_raster.hpp"
 
-#include "tiler/geodesy.hpp"
+#include "core/error.hpp"
 #include "tiler/sources/geoid.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <utility>
@@ -47,15 +48,62 @@ LatticeFootprint lattice_footprint(
 
 namespace {
 
+// Unit vectors (on a sphere) of the lattice points of zoom z from (c0, r0), w x h: longitude
+// depends on the column alone and latitude on the row alone in both schemes, so the
+// trigonometry is done once per column and per row.
+class UnitLattice {
+public:
+    UnitLattice(Scheme scheme, int z, int n, std::int64_t c0, std::int64_t r0, int w, int h)
+        : c0_(c0), r0_(r0) {
+        constexpr double kRad = 3.14159265358979323846 / 180.0;
+        for (int i = 0; i < w; ++i) {
+            const double lon = native_to_lonlat(scheme, lattice_x(scheme, z, n, c0 + i), 0).lon;
+            cos_lon_.push_back(std::cos(lon * kRad));
+            sin_lon_.push_back(std::sin(lon * kRad));
+        }
+        for (int j = 0; j < h; ++j) {
+            const double lat = native_to_lonlat(scheme, 0, lattice_y(scheme, z, n, r0 + j)).lat;
+            cos_lat_.push_back(std::cos(lat * kRad));
+            sin_lat_.push_back(std::sin(lat * kRad));
+        }
+    }
+    // Metres between two lattice points (the chord on a sphere of the Earth's mean radius).
+    double metres(std::int64_t c, std::int64_t r, std::int64_t qc, std::int64_t qr) const {
+        const auto u = at(c, r), v = at(qc, qr);
+        return 6371008.8 * std::hypot(u[0] - v[0], u[1] - v[1], u[2] - v[2]);
+    }
+
+private:
+    std::array<double, 3> at(std::int64_t c, std::int64_t r) const {
+        const auto i = static_cast<std::size_t>(c - c0_), j = static_cast<std::size_t>(r - r0_);
+        return {cos_lat_[j] * cos_lon_[i], cos_lat_[j] * sin_lon_[i], sin_lat_[j]};
+    }
+    std::int64_t c0_, r0_;
+    std::vector<double> cos_lon_, sin_lon_, cos_lat_, sin_lat_;
+};
+
+// The orthometric height carried to lattice point (c, r) from the footprint point (qc, qr)
+// nearest it, whose height is `edge`. The slope starts one lattice step out: the first ring
+// beyond the footprint keeps the edge's height, since the DEM's own pixels may reach up to a
+// step past the lattice points inside it.
+double carried_ortho(double edge,
+                     const UnitLattice& units,
+                     std::int64_t c,
+                     std::int64_t r,
+                     std::int64_t qc,
+                     std::int64_t qr) {
+    const auto back = [](std::int64_t v, std::int64_t q) { return v - (v > q) + (v < q); };
+    const double d = units.metres(back(c, qc), back(r, qr), qc, qr);
+    return std::copysign(std::max(0.0, std::abs(edge) - kEdgeGrade * d), edge);
+}
+
 LonLat lattice_lonlat(Scheme scheme, int z, int n, std::int64_t c, std::int64_t r) {
     return native_to_lonlat(scheme, lattice_x(scheme, z, n, c), lattice_y(scheme, z, n, r));
 }
 
-// The orthometric height carried to p from the footprint point q, whose height is `edge`.
-double carried_ortho(double edge, const LonLat& p, const LonLat& q) {
-    const Ecef a = to_ecef({p.lon, p.lat, 0}), b = to_ecef({q.lon, q.lat, 0});
-    const double d = std::hypot(a.x - b.x, a.y - b.y, a.z - b.z);
-    return std::copysign(std::max(0.0, std::abs(edge) - kEdgeGrade * d), edge);
+double undulation_at(Scheme scheme, int z, int n, std::int64_t c, std::int64_t r) {
+    const LonLat p = lattice_lonlat(scheme, z, n, c, r);
+    return egm96_undulation(p.lon, p.lat);
 }
 
 } // namespace
@@ -67,17 +115,26 @@ double carried_height(Scheme scheme,
                       std::int64_t row,
                       const LatticeFootprint& fp,
                       VerticalDatum datum) {
+    TB_ASSERT(fp.first_column <= fp.last_column && fp.first_row <= fp.last_row && fp.sample);
     const std::int64_t qc = std::clamp(column, fp.first_column, fp.last_column);
     const std::int64_t qr = std::clamp(row, fp.first_row, fp.last_row);
     const LatticeBlock b = fp.sample(scheme, z, tile_size, qc, qr, 1, 1);
     if (b.valid.empty() || b.valid[0] == 0) {
         return std::nan("");
     }
-    const LonLat p = lattice_lonlat(scheme, z, tile_size, column, row);
-    const LonLat q = lattice_lonlat(scheme, z, tile_size, qc, qr);
+    const bool ellipsoid = datum == VerticalDatum::Ellipsoid;
     const double edge =
-        b.heights[0] - (datum == VerticalDatum::Ellipsoid ? egm96_undulation(q.lon, q.lat) : 0.0);
-    return carried_ortho(edge, p, q) + egm96_undulation(p.lon, p.lat);
+        b.heights[0] - (ellipsoid ? undulation_at(scheme, z, tile_size, qc, qr) : 0);
+    const std::int64_t c0 = std::min(column, qc), r0 = std::min(row, qr);
+    const UnitLattice units(scheme,
+                            z,
+                            tile_size,
+                            c0,
+                            r0,
+                            static_cast<int>(std::max(column, qc) - c0 + 1),
+                            static_cast<int>(std::max(row, qr) - r0 + 1));
+    return carried_ortho(edge, units, column, row, qc, qr) +
+           undulation_at(scheme, z, tile_size, column, row);
 }
 
 namespace {
@@ -89,55 +146,35 @@ void carry_edge_outward(Scheme scheme,
                         int n,
                         int w,
                         const LatticeBlock& block,
-                        VerticalDatum datum,
                         const LatticeFootprint& fp,
                         std::vector<double>& ortho,
                         std::vector<std::uint8_t>& known) {
+    TB_ASSERT(fp.first_column <= fp.last_column && fp.first_row <= fp.last_row);
     const std::int64_t c0 = block.column0, r0 = block.row0;
     const auto clamp_c = [&](std::int64_t c) {
         return std::clamp(c, fp.first_column, fp.last_column);
     };
     const auto clamp_r = [&](std::int64_t r) { return std::clamp(r, fp.first_row, fp.last_row); };
-    const std::int64_t ca = clamp_c(c0), cb = clamp_c(c0 + w - 1);
-    const std::int64_t ra = clamp_r(r0), rb = clamp_r(r0 + w - 1);
-    if (ca == c0 && cb == c0 + w - 1 && ra == r0 && rb == r0 + w - 1) {
+    if (clamp_c(c0) == c0 && clamp_c(c0 + w - 1) == c0 + w - 1 && clamp_r(r0) == r0 &&
+        clamp_r(r0 + w - 1) == r0 + w - 1) {
         return; // the block lies inside the footprint
     }
-    const auto lonlat = [&](std::int64_t c, std::int64_t r) {
-        return lattice_lonlat(scheme, z, n, c, r);
+    // A tile meets the data, so the footprint points nearest its block's lie in the block.
+    TB_ASSERT(clamp_c(c0) < c0 + w && clamp_c(c0 + w - 1) >= c0);
+    TB_ASSERT(clamp_r(r0) < r0 + w && clamp_r(r0 + w - 1) >= r0);
+    const UnitLattice units(scheme, z, n, c0, r0, w, w);
+    const auto at = [&](std::int64_t c, std::int64_t r) {
+        return static_cast<std::size_t>((r - r0) * w + (c - c0));
     };
-    // The clamped points lie in the block unless the block misses the footprint: then read them.
-    const bool own = ca >= c0 && cb < c0 + w && ra >= r0 && rb < r0 + w;
-    const auto read_width = static_cast<int>(cb - ca + 1);
-    LatticeBlock read;
-    if (!own) {
-        read = fp.sample(scheme, z, n, ca, ra, read_width, static_cast<int>(rb - ra + 1));
-    }
-    const auto edge_height = [&](std::int64_t c, std::int64_t r, double& h) {
-        if (own) {
-            const auto k = static_cast<std::size_t>((r - r0) * w + (c - c0));
-            h = ortho[k];
-            return block.valid[k] != 0;
-        }
-        const auto k = static_cast<std::size_t>((r - ra) * read_width + (c - ca));
-        h = read.heights[k];
-        if (read.valid[k] != 0 && datum == VerticalDatum::Ellipsoid) {
-            const LonLat p = lonlat(c, r);
-            h -= egm96_undulation(p.lon, p.lat);
-        }
-        return read.valid[k] != 0;
-    };
-    for (int j = 0; j < w; ++j) {
-        for (int i = 0; i < w; ++i) {
-            const std::int64_t c = c0 + i, r = r0 + j;
-            const auto k = static_cast<std::size_t>(j) * w + i;
-            double h = 0;
-            if ((clamp_c(c) == c && clamp_r(r) == r) || block.valid[k] != 0 ||
-                !edge_height(clamp_c(c), clamp_r(r), h)) {
+    for (std::int64_t r = r0; r < r0 + w; ++r) {
+        for (std::int64_t c = c0; c < c0 + w; ++c) {
+            const std::int64_t qc = clamp_c(c), qr = clamp_r(r);
+            if ((qc == c && qr == r) || block.valid[at(c, r)] != 0 ||
+                block.valid[at(qc, qr)] == 0) {
                 continue; // inside, measured, or beyond a void edge (left to fill_voids)
             }
-            ortho[k] = carried_ortho(h, lonlat(c, r), lonlat(clamp_c(c), clamp_r(r)));
-            known[k] = 1;
+            ortho[at(c, r)] = carried_ortho(ortho[at(qc, qr)], units, c, r, qc, qr);
+            known[at(c, r)] = 1;
         }
     }
 }
@@ -149,7 +186,7 @@ TileRaster lattice_tile_raster(const TileId& id,
                                Scheme scheme,
                                int tile_size,
                                VerticalDatum datum,
-                               const LatticeFootprint& footprint) {
+                               const LatticeFootprint* footprint) {
     const int n = tile_size;
     const int m = kLatticeFillMargin;
     const int w = n + 1 + 2 * m;
@@ -172,7 +209,9 @@ TileRaster lattice_tile_raster(const TileId& id,
         }
     }
     std::vector<std::uint8_t> known = block.valid;
-    carry_edge_outward(scheme, id.z, n, w, block, datum, footprint, ortho, known);
+    if (footprint != nullptr) {
+        carry_edge_outward(scheme, id.z, n, w, block, *footprint, ortho, known);
+    }
     fill_voids(ortho, known, w, w, m, 0.0);
 
     TileRaster raster;

@@ -48,10 +48,13 @@ double carried_height(Scheme scheme,
 // Tile `id`'s raster of (tile_size + 1)^2 ellipsoidal heights from `block`, the lattice samples
 // of the tile and kLatticeFillMargin around it ((tile_size + 1 + 2 * margin)^2 from the tile's
 // first column and row less the margin), heights in `datum` (Egm96 or Ellipsoid).
-//   - A void beyond `footprint` takes the orthometric height of the footprint point nearest
-//     it (column and row clamped), lowered toward sea level by kEdgeGrade per metre between
-//     the two, when that point is valid: the DEM's edge carried outward on a gentle slope, not
-//     a cliff, and a function of the lattice point alone, so neighbouring tiles agree.
+//   - With a `footprint` (globe terrain, which draws past the data), a void beyond it takes the
+//     orthometric height of the footprint point nearest it (column and row clamped), lowered
+//     toward sea level by kEdgeGrade per metre from a lattice step beyond that point, when it is
+//     valid: the DEM's edge carried outward on a slope, not a cliff, and a function of the
+//     lattice point alone, so neighbouring tiles agree. Meshes that leave voids out (3D Tiles,
+//     Draco) pass none: their kept triangles span from the data into the first voids, and
+//     there the nearest values fill_voids gives keep the surface closest to the pixels between.
 //   - Other voids are filled in orthometric heights (fill_voids), so data-free areas sit on
 //     the geoid (sea level).
 // The valid mask is kept where some sample is void; carried and filled samples are not valid.
@@ -60,6 +63,6 @@ TileRaster lattice_tile_raster(const TileId& id,
                                Scheme scheme,
                                int tile_size,
                                VerticalDatum datum,
-                               const LatticeFootprint& footprint);
+                               const LatticeFootprint* footprint);
 
 } // namespace tb::tiler
