@@ -1,18 +1,26 @@
 // `terrabound build -o OUT.pmtiles` read by the pmtiles npm library (the reader MapLibre's
 // pmtiles protocol uses), in Node: the header, the metadata's encoding, and every DEM tile of a
-// directory build of the same DEM and options found in the archive byte for byte.
+// directory build of the same DEM and options found in the archive byte for byte. Then in
+// headless Chromium: MapLibre GL JS with the pmtiles protocol draws the archive, served by
+// byte ranges, as terrain with the heights it draws from the directory build's tiles.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import fs from 'node:fs';
 import fsp from 'node:fs/promises';
 import os from 'node:os';
 import path from 'node:path';
-import { DEM, TB_BINARY, WEB, missingPrerequisite, execFileP } from './helpers.mjs';
+import http from 'node:http';
+import {
+  DEM, TB_BINARY, WEB, missingPrerequisite, execFileP, launchBrowser, openPage, describeRecord,
+  fileUnder,
+} from './helpers.mjs';
 
 const LAYER = 'hills';
-// A corner of the DEM keeps the builds short; 256-pixel tiles make more of them.
+// A corner of the DEM keeps the builds short (Gothenburg's coast: sea and hills); 256-pixel
+// tiles make more of them.
+const BBOX = [11.75, 57.5, 12.0, 57.75];
 const BUILD = ['--layer', LAYER, '--formats', 'terrarium', '--dem-size', '256',
-  '--bbox', '11.0,57.0,11.25,57.25'];
+  '--bbox', BBOX.join(',')];
 const PMTILES = path.join(WEB, 'node_modules', 'pmtiles', 'dist', 'esm', 'index.js');
 const skip = missingPrerequisite() ||
   (fs.existsSync(PMTILES) ? null : 'web/node_modules/pmtiles missing: run npm ci --prefix web');
@@ -87,4 +95,106 @@ test('the pmtiles library reads every DEM tile of a build -o OUT.pmtiles byte fo
   }
   assert.equal(header.minZoom, minZoom);
   assert.equal(header.maxZoom, maxZoom);
+});
+
+// An HTTP server on loopback for the browser: the page, web/ (MapLibre, pmtiles), the archive
+// with byte ranges (206, as static hosts answer them) and the directory build's tiles.
+async function startRangeServer(root) {
+  const web = fs.realpathSync(WEB);
+  const server = http.createServer(async (req, res) => {
+    const url = new URL(req.url, 'http://127.0.0.1');
+    try {
+      if (url.pathname === '/page.html') {
+        res.writeHead(200, { 'Content-Type': 'text/html' }).end(PAGE);
+        return;
+      }
+      const file = url.pathname.startsWith('/web/')
+        ? fileUnder(web, decodeURIComponent(url.pathname.slice(5)))
+        : fileUnder(root, decodeURIComponent(url.pathname.slice(1)));
+      const body = await fsp.readFile(file);
+      const type = file.endsWith('.js') || file.endsWith('.mjs') ? 'text/javascript'
+        : file.endsWith('.png') ? 'image/png' : 'application/octet-stream';
+      const range = /^bytes=(\d+)-(\d+)$/.exec(req.headers.range || '');
+      if (range) {
+        const first = Number(range[1]);
+        const last = Math.min(Number(range[2]), body.length - 1);
+        res.writeHead(206, { 'Content-Type': type, 'Content-Range': `bytes ${first}-${last}/${body.length}` });
+        res.end(body.subarray(first, last + 1));
+      } else {
+        res.writeHead(200, { 'Content-Type': type }).end(body);
+      }
+    } catch {
+      res.writeHead(404).end();
+    }
+  });
+  await new Promise((resolve) => server.listen(0, '127.0.0.1', resolve));
+  return {
+    url: `http://127.0.0.1:${server.address().port}`,
+    stop: () => new Promise((resolve) => { server.closeAllConnections(); server.close(resolve); }),
+  };
+}
+
+// MapLibre with terrain from `?source=pmtiles` (the archive through the pmtiles protocol) or
+// `?source=dir` (the directory build's tiles); window.tbPm.heights once idle: the terrain's
+// elevation at a grid of points over the bbox.
+const PAGE = `<!doctype html><html><head><meta charset="utf-8">
+<link rel="stylesheet" href="/web/node_modules/maplibre-gl/dist/maplibre-gl.css">
+<script src="/web/node_modules/pmtiles/dist/pmtiles.js"></script>
+<style>html, body, #map { margin: 0; height: 100%; }</style></head>
+<body><div id="map"></div><script type="module">
+import * as maplibregl from '/web/node_modules/maplibre-gl/dist/maplibre-gl.mjs';
+const state = { done: false, errors: [], heights: null };
+window.tbPm = state;
+const protocol = new pmtiles.Protocol();
+maplibregl.addProtocol('pmtiles', protocol.tile);
+const dem = new URLSearchParams(location.search).get('source') === 'pmtiles'
+  ? { type: 'raster-dem', url: 'pmtiles://' + location.origin + '/out.pmtiles', encoding: 'terrarium', tileSize: 256 }
+  : { type: 'raster-dem', tiles: [location.origin + '/dir/${LAYER}/dem/{z}/{x}/{y}.png'], encoding: 'terrarium',
+      tileSize: 256, minzoom: 0, maxzoom: 12, bounds: [${BBOX}] };
+const map = new maplibregl.Map({ container: 'map', center: [${(BBOX[0] + BBOX[2]) / 2}, ${(BBOX[1] + BBOX[3]) / 2}], zoom: 11, pitch: 50,
+  style: { version: 8, sources: { dem }, layers: [{ id: 'shade', type: 'hillshade', source: 'dem' }],
+    terrain: { source: 'dem', exaggeration: 1 } },
+  fadeDuration: 0, attributionControl: false });
+map.on('error', (e) => state.errors.push(String((e && e.error && e.error.message) || e)));
+map.once('idle', () => {
+  const heights = [];
+  for (let i = 1; i < 6; ++i) for (let j = 1; j < 6; ++j) {
+    heights.push(map.queryTerrainElevation([${BBOX[0]} + 0.25 * i / 6, ${BBOX[1]} + 0.25 * j / 6]));
+  }
+  state.heights = heights;
+  state.done = true;
+});
+</script></body></html>`;
+
+test('MapLibre GL JS draws the archive through the pmtiles protocol as the directory build\'s terrain',
+  { skip: missingPrerequisite({ browser: true }) || skip || false, timeout: 180000 }, async (t) => {
+  const server = await startRangeServer(work);
+  const browser = await launchBrowser({ width: 640, height: 400 });
+  try {
+    const heights = {};
+    for (const source of ['pmtiles', 'dir']) {
+      const { page, record } = await openPage(browser.context);
+      const ranges = [];
+      page.on('response', (r) => { if (r.url().endsWith('/out.pmtiles')) ranges.push(r.status()); });
+      await page.goto(`${server.url}/page.html?source=${source}`, { waitUntil: 'load' });
+      await page.waitForFunction(() => window.tbPm && window.tbPm.done, null, { timeout: 120000 })
+        .catch((e) => assert.fail(`${source}: the map did not become idle: ${e.message}\n${describeRecord(record)}`));
+      const state = await page.evaluate(() => window.tbPm);
+      assert.deepEqual(state.errors, [], `${source}: map errors\n${describeRecord(record)}`);
+      assert.deepEqual(record.pageErrors, [], `${source}: page errors`);
+      assert.deepEqual(record.failedRequests, [], `${source}: failed requests`);
+      if (source === 'pmtiles') {
+        assert.ok(ranges.length > 1 && ranges.every((s) => s === 206), `archive reads: ${ranges}`);
+      }
+      heights[source] = state.heights;
+      await page.close();
+    }
+    t.diagnostic(`terrain heights over the bbox: ${heights.pmtiles.map((h) => h && h.toFixed(1)).join(' ')}`);
+    assert.ok(heights.pmtiles.every((h) => Number.isFinite(h)), 'terrain under every point');
+    assert.ok(new Set(heights.pmtiles.map((h) => Math.round(h))).size > 3, 'relief, not a flat plane');
+    assert.deepEqual(heights.pmtiles, heights.dir);
+  } finally {
+    await browser.close();
+    await server.stop();
+  }
 });
