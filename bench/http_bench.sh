@@ -6,7 +6,9 @@
 # Environment: TB_BIN (terrabound binary; default: build a Release one in build-bench/),
 #              DURATION (wrk seconds per run, default 10), ROUNDS (alternated runs per server,
 #              default 3), CONNECTIONS (default 64),
-#              COLD_PER_ZOOM (cold tiles timed per zoom, default 20).
+#              COLD_PER_ZOOM (cold tiles timed per zoom, default 20), EFFORT (the layer's
+#              mesher effort: fast, balanced or best; default the layer's default),
+#              HOT (0: the cold cases only, which are the ones EFFORT changes; default 1).
 #
 # Cases (one TSV line each, on stdout; logs on stderr):
 #   hot_terrabound / hot_nginx: requests/s and p50/p99 latency (ms) of wrk over the same set of
@@ -16,7 +18,7 @@
 #   cold_zZ: on-demand latency of tiles never requested before (fresh server, no store) at
 #     zooms 8..12 of a 1201x1201 SRTM tile (target p50 < 20 ms, p99 < 50 ms), one keep-alive
 #     connection.
-# Needs wrk, nginx and curl (Debian: apt-get install -y wrk nginx-light curl).
+# Needs wrk, nginx and curl (Debian: apt-get install -y wrk nginx-light curl); HOT=0 needs curl only.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
@@ -24,7 +26,9 @@ ROOT=$(pwd)
 log() { printf '%s http_bench: %s\n' "$(date -u +%FT%TZ)" "$*" >&2; }
 die() { log "$*"; exit 1; }
 
-for tool in wrk nginx curl python3; do
+TOOLS="curl python3"
+[ "${HOT:-1}" = 0 ] || TOOLS="wrk nginx $TOOLS"
+for tool in $TOOLS; do
     command -v "$tool" >/dev/null || die "$tool is missing; apt-get install -y wrk nginx-light curl"
 done
 
@@ -82,7 +86,7 @@ write_config() {  # $1 = file, $2 = store (JSON value)
     cat >"$1" <<EOF
 {"server": {"threads": 2, "cache_mb": 512, "log_level": "warn", "queue_limit": 1000},
  "layers": [{"name": "bench", "sources": ["$DEM"], "min_zoom": 8, "max_zoom": 12,
-             "formats": ["glb"], "store": $2}]}
+             "formats": ["glb"], "store": $2${EFFORT:+, \"effort\": \"$EFFORT\"}}]}
 EOF
 }
 
@@ -145,6 +149,8 @@ print(f"{t / n * 1000:.1f}" if n else "-")' "$WORK/metrics_$z.txt" "$WORK/metric
     printf 'cold_z%s\t-\t%s\tfresh tiles, sequential; mean make_tile %s ms\n' "$z" "$stats" "$gen"
 done
 stop_server
+
+[ "${HOT:-1}" = 0 ] && exit 0
 
 # ---- hot: the same tiles from terrabound's LRU and from nginx over the directory store ----
 write_config "$WORK/hot.json" "\"$WORK/store\""
