@@ -128,7 +128,7 @@ export async function fetchBytes(url) {
 
 // --- static web/ server --------------------------------------------------------------------
 
-const MIME = {
+export const MIME = {
   '.html': 'text/html; charset=utf-8', '.js': 'text/javascript; charset=utf-8',
   '.mjs': 'text/javascript; charset=utf-8', '.css': 'text/css; charset=utf-8',
   '.json': 'application/json', '.wasm': 'application/wasm', '.png': 'image/png',
@@ -150,14 +150,25 @@ export async function startStaticWeb() {
 }
 
 // An HTTP server on a free loopback port answering GET and HEAD with what `route(pathname)`
-// resolves to ({ body, type }), and 404 where that is null or throws; stop() closes it.
+// resolves to ({ body, type }), and 404 where that is null or throws; stop() closes it. A
+// `Range: bytes=A-B` request gets those bytes with 206, as static hosts answer it.
 export async function startFileServer(route) {
   const server = http.createServer(async (req, res) => {
     try {
       const found = await route(new URL(req.url, 'http://127.0.0.1').pathname);
       if (!found) throw new Error('not found');
-      res.writeHead(200, { 'Content-Type': found.type, 'Content-Length': Buffer.byteLength(found.body) });
-      res.end(req.method === 'HEAD' ? undefined : found.body);
+      let body = Buffer.from(found.body);
+      const headers = { 'Content-Type': found.type };
+      const range = /^bytes=(\d+)-(\d+)$/.exec(req.headers.range || '');
+      if (range) {
+        const first = Number(range[1]);
+        const last = Math.min(Number(range[2]), body.length - 1);
+        headers['Content-Range'] = `bytes ${first}-${last}/${body.length}`;
+        body = body.subarray(first, last + 1);
+      }
+      headers['Content-Length'] = body.length;
+      res.writeHead(range ? 206 : 200, headers);
+      res.end(req.method === 'HEAD' ? undefined : body);
     } catch {
       res.writeHead(404, { 'Content-Type': 'text/plain' }).end('not found');
     }

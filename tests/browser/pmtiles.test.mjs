@@ -9,10 +9,9 @@ import fs from 'node:fs';
 import fsp from 'node:fs/promises';
 import os from 'node:os';
 import path from 'node:path';
-import http from 'node:http';
 import {
   DEM, TB_BINARY, WEB, missingPrerequisite, execFileP, launchBrowser, openPage, describeRecord,
-  fileUnder,
+  fileUnder, startFileServer, MIME,
 } from './helpers.mjs';
 
 const LAYER = 'hills';
@@ -97,41 +96,19 @@ test('the pmtiles library reads every DEM tile of a build -o OUT.pmtiles byte fo
   assert.equal(header.maxZoom, maxZoom);
 });
 
-// An HTTP server on loopback for the browser: the page, web/ (MapLibre, pmtiles), the archive
-// with byte ranges (206, as static hosts answer them) and the directory build's tiles.
-async function startRangeServer(root) {
+// The browser's server: the page, web/ (MapLibre, pmtiles), and under `root` the archive (read
+// by byte ranges) and the directory build's tiles.
+function startPageServer(root) {
   const web = fs.realpathSync(WEB);
-  const server = http.createServer(async (req, res) => {
-    const url = new URL(req.url, 'http://127.0.0.1');
-    try {
-      if (url.pathname === '/page.html') {
-        res.writeHead(200, { 'Content-Type': 'text/html' }).end(PAGE);
-        return;
-      }
-      const file = url.pathname.startsWith('/web/')
-        ? fileUnder(web, decodeURIComponent(url.pathname.slice(5)))
-        : fileUnder(root, decodeURIComponent(url.pathname.slice(1)));
-      const body = await fsp.readFile(file);
-      const type = file.endsWith('.js') || file.endsWith('.mjs') ? 'text/javascript'
-        : file.endsWith('.png') ? 'image/png' : 'application/octet-stream';
-      const range = /^bytes=(\d+)-(\d+)$/.exec(req.headers.range || '');
-      if (range) {
-        const first = Number(range[1]);
-        const last = Math.min(Number(range[2]), body.length - 1);
-        res.writeHead(206, { 'Content-Type': type, 'Content-Range': `bytes ${first}-${last}/${body.length}` });
-        res.end(body.subarray(first, last + 1));
-      } else {
-        res.writeHead(200, { 'Content-Type': type }).end(body);
-      }
-    } catch {
-      res.writeHead(404).end();
-    }
+  return startFileServer(async (pathname) => {
+    if (pathname === '/page.html') return { body: PAGE, type: 'text/html' };
+    const file = pathname.startsWith('/web/')
+      ? fileUnder(web, decodeURIComponent(pathname.slice(5)))
+      : fileUnder(root, decodeURIComponent(pathname.slice(1)));
+    return file && {
+      body: await fsp.readFile(file), type: MIME[path.extname(file)] || 'application/octet-stream',
+    };
   });
-  await new Promise((resolve) => server.listen(0, '127.0.0.1', resolve));
-  return {
-    url: `http://127.0.0.1:${server.address().port}`,
-    stop: () => new Promise((resolve) => { server.closeAllConnections(); server.close(resolve); }),
-  };
 }
 
 // MapLibre with terrain from `?source=pmtiles` (the archive through the pmtiles protocol) or
@@ -168,7 +145,7 @@ map.once('idle', () => {
 
 test('MapLibre GL JS draws the archive through the pmtiles protocol as the directory build\'s terrain',
   { skip: missingPrerequisite({ browser: true }) || skip || false, timeout: 180000 }, async (t) => {
-  const server = await startRangeServer(work);
+  const server = await startPageServer(work);
   const browser = await launchBrowser({ width: 640, height: 400 });
   try {
     const heights = {};
