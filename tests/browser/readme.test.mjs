@@ -4,7 +4,9 @@
 //             gdal_translate in a temp dir (the commands run there) and /srv/tiles is a temp dir;
 //             exit 0, and every path under /srv/tiles the prose after the block names exists,
 //             with the layer's documents. `make run` / `make test` are not re-run (this test is
-//             itself run by `make test`): the Makefile must have those targets.
+//             itself run by `make test`): the Makefile must have those targets. A
+//             `bench/*.sh` line is not run (minutes, and a peer built by hand): the script
+//             must exist, be executable and handle each --option the line gives it.
 //   ```nginx  Debian's nginx with exactly that server block (its port, root and include paths
 //             substituted) serves the build: layer.json, a gzip .terrain, the DEM TileJSON.
 //   ```js     each snippet runs unchanged (only http://127.0.0.1:8080 becomes the test server's
@@ -147,6 +149,20 @@ for (const l of shLines) {
         buildOut = out;
         buildCommand = { line: l.line, layer, baseUrl };
       });
+    continue;
+  }
+  const script = words.find((w) => !/^[A-Z_]+=/.test(w));
+  if (script && /^bench\/[\w-]+\.sh$/.test(script)) {
+    // A benchmark is not run here (it takes minutes and a peer built by hand), but it must
+    // exist, be executable, and take every option the README gives it.
+    test(`README.md:${l.line}: \`${l.text}\` names a benchmark script and its options`, () => {
+      const file = path.join(REPO, script);
+      fs.accessSync(file, fs.constants.X_OK);
+      const text = fs.readFileSync(file, 'utf8');
+      for (const option of words.filter((w) => w.startsWith('--'))) {
+        assert.ok(text.includes(`${option})`), `${script} has no case for ${option}`);
+      }
+    });
     continue;
   }
   test(`README.md:${l.line}: \`${l.text}\``, () => {
