@@ -382,6 +382,34 @@ TEST_CASE("voids not declared as nodata are named with the fix, and --nodata fix
     CHECK(run(dir, "build " + dem + " -o " + dir.file("o2") + kBuild + " --nodata x").code == 2);
 }
 
+TEST_CASE("undeclared voids in a mosaic are found in its files' statistics merged") {
+    ScratchDir dir;
+    // Two cells side by side: 800 samples of -32767 in the west one, 200 in the east one. The
+    // mosaic's share is what both hold together: 1,000 of 2 x 129^2, 3 %.
+    Fixture west = hills(129, GDT_Int16);
+    Fixture east = hills(129, GDT_Int16);
+    (*east.geotransform)[0] += 0.5;
+    for (int y = 40; y < 60; ++y) {
+        for (int x = 30; x < 70; ++x) {
+            west.values[static_cast<std::size_t>(y) * 129 + x] = -32767;
+            if (x < 40) {
+                east.values[static_cast<std::size_t>(y) * 129 + x] = -32767;
+            }
+        }
+    }
+    const std::vector<std::string> paths{tb_test::write_fixture(dir.file("w.tif"), west),
+                                         tb_test::write_fixture(dir.file("e.tif"), east)};
+    std::string message;
+    try {
+        tb::tiler::DemSource::open(paths);
+    } catch (const tb::InputError& e) {
+        message = e.what();
+    }
+    CHECK(message.find("3% of band 1's samples are -32767") != std::string::npos);
+    CHECK(message.find("(100 .. 500 m)") != std::string::npos);
+    CHECK(tb::tiler::DemSource::open(paths, -32767.0)->info().min_height == 100);
+}
+
 TEST_CASE("a sea at 0 m beside land, or a plateau, is not taken for undeclared voids") {
     ScratchDir dir;
     Fixture f = hills(129);
@@ -407,6 +435,64 @@ TEST_CASE("a NUL byte in a DEM path is refused, not cut off") {
     } catch (const tb::InputError& e) {
         CHECK(std::string(e.what()).find("NUL") != std::string::npos);
         CHECK(std::string(e.what()).find(dem + "\\x00.bak") != std::string::npos);
+    }
+}
+
+TEST_CASE("a mosaic of files of mixed types, scales and nodata reads each as it is, and its "
+          "range and outliers come from the files' own scans") {
+    ScratchDir dir;
+    // Three 40 x 40 cells of one 3" grid, west to east: Int16 declaring -32768 as nodata, Float32
+    // declaring none (its -32768 samples are voids through the mosaic's nodata, which the first
+    // file gives), and Int16 heights stored as raw * 0.5 + 10, one raw 20000 (10,010 m) among them.
+    const auto cell = [&](int index, GDALDataType type, double value) {
+        Fixture f;
+        f.width = f.height = 40;
+        f.type = type;
+        f.epsg = 4326;
+        f.geotransform =
+            std::array<double, 6>{7.6 + index * 40.0 / 1200, 1.0 / 1200, 0, 46.4, 0, -1.0 / 1200};
+        f.values.assign(1600, value);
+        return f;
+    };
+    Fixture a = cell(0, GDT_Int16, 100);
+    a.nodata = -32768;
+    a.values[3 * 40 + 3] = 150;
+    a.values[4 * 40 + 3] = -32768;
+    Fixture b = cell(1, GDT_Float32, 200);
+    b.values[10 * 40 + 10] = 40;
+    for (int k = 0; k < 40; ++k) {
+        b.values[20 * 40 + k] = -32768;
+    }
+    Fixture c = cell(2, GDT_Int16, 400);
+    c.scale = 0.5, c.offset = 10;
+    c.values[7 * 40 + 5] = 20000;
+    const std::vector<std::string> paths{tb_test::write_fixture(dir.file("a.tif"), a),
+                                         tb_test::write_fixture(dir.file("b.tif"), b),
+                                         tb_test::write_fixture(dir.file("c.tif"), c)};
+    const auto mosaic = tb::tiler::DemSource::open(paths);
+    REQUIRE(mosaic->parts().size() == 1); // one grid: one mosaic
+    const tb::tiler::DemInfo& info = mosaic->info();
+    CHECK(info.width == 120);
+    CHECK(info.height == 40);
+    CHECK(info.data_type == "Float64"); // the scales differ: the mosaic applies them
+    CHECK(info.range_exact);
+    CHECK(info.has_data);
+    CHECK(info.min_height == 40);
+    CHECK(info.max_height == 210);
+    CHECK(info.outliers == 1);
+    CHECK(info.outlier_column == 80 + 5); // a pixel of the mosaic
+    CHECK(info.outlier_row == 7);
+    CHECK(info.outlier_height == 10010);
+    // Each cell's heights as the mosaic reads them, away from the odd pixels.
+    const double step = 180.0 / std::exp2(12) / 256;
+    const auto row = static_cast<std::int64_t>(std::llround((90 - (46.4 - 30.5 / 1200)) / step));
+    const double expected[] = {100, 200, 210};
+    for (int k = 0; k < 3; ++k) {
+        const double lon = 7.6 + (k * 40 + 30.5) / 1200;
+        const auto column = static_cast<std::int64_t>(std::llround((lon + 180) / step));
+        const auto block = mosaic->sample(tb::tiler::Scheme::Geodetic, 12, 256, column, row, 1, 1);
+        CHECK(block.valid[0] == 1);
+        CHECK(block.heights[0] == expected[k]);
     }
 }
 

@@ -5,6 +5,7 @@
 #include "tiler/log.hpp"
 #include "tiler/sources/collection_source.hpp"
 #include "tiler/sources/gdal_source.hpp"
+#include "tiler/sources/mosaic_vrt.hpp"
 #include "tiler/sources/source_list.hpp"
 
 #include <cpl_conv.h>
@@ -12,7 +13,6 @@
 #include <cpl_string.h>
 #include <cpl_vsi.h>
 #include <gdal_priv.h>
-#include <gdal_utils.h>
 #include <ogr_spatialref.h>
 
 #include <algorithm>
@@ -41,33 +41,11 @@ struct CslDeleter {
 };
 using CslPtr = std::unique_ptr<char*, CslDeleter>;
 
-struct BuildVrtOptionsDeleter {
-    void operator()(GDALBuildVRTOptions* o) const { GDALBuildVRTOptionsFree(o); }
-};
-
 OGRSpatialReference scheme_srs(Scheme scheme) {
     OGRSpatialReference srs;
     srs.importFromEPSG(scheme == Scheme::Geodetic ? 4326 : 3857);
     srs.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
     return srs;
-}
-
-// Rejects what is not a height band: complex numbers, colour images (RGB(A), palettes; e.g.
-// Terrain-RGB PNGs must be decoded to heights first).
-void check_band(const std::string& name, GDALDataset& ds) {
-    GDALRasterBand* band = ds.GetRasterBand(1);
-    const GDALDataType type = band->GetRasterDataType();
-    if (GDALDataTypeIsComplex(type)) {
-        throw InputError(name + ": band 1 holds complex numbers (" + GDALGetDataTypeName(type) +
-                         "), not heights; convert it to a real type");
-    }
-    const GDALColorInterp colour = band->GetColorInterpretation();
-    if (colour == GCI_PaletteIndex || colour == GCI_RedBand ||
-        (type == GDT_Byte && ds.GetRasterCount() >= 3)) {
-        throw InputError(
-            name + ": is a colour image (RGB(A) or palette), not a height raster; decode it "
-                   "to heights first (e.g. Terrain-RGB: -10000 + (R*65536 + G*256 + B) * 0.1)");
-    }
 }
 
 // Without overviews each coarse zoom reads every block of the source, which is slow for a large
@@ -970,63 +948,60 @@ double sample_height(
 
 namespace {
 
-// One in-memory VRT mosaic of files that share a CRS and a pixel size; the first given wins
-// where they overlap (a VRT draws its last source on top, so they are handed over reversed).
-// Where no file lies the mosaic reads its own nodata value, which is always set: --nodata, else
-// the first file's that has one, else NaN. (Without it GDAL takes the nodata of the first file
-// it is handed, and where that has none, the gaps between files read as 0 m of data.)
-std::shared_ptr<const DemSource> open_mosaic(const std::vector<std::string>& paths,
-                                             const std::vector<DemInfo>& infos,
-                                             std::optional<double> nodata,
-                                             const ValidRange& range) {
-    const std::string names = inputs_text(paths);
-    CslPtr argv(CSLAddString(nullptr, "-b"));
-    argv.reset(CSLAddString(argv.release(), "1"));
-    char value[32];
+// What a mosaic reads where no file lies: --nodata, else the first file's nodata, else NaN.
+// (Left unset, the gaps between files would read as 0 m of data where the first has none.)
+double mosaic_nodata(const std::vector<const FileScan*>& files, std::optional<double> nodata) {
     if (nodata) {
-        std::snprintf(value, sizeof value, "%.17g", *nodata);
-        argv.reset(CSLAddString(argv.release(), "-srcnodata"));
-        argv.reset(CSLAddString(argv.release(), value));
-    } else {
-        std::snprintf(value, sizeof value, "nan");
-        for (const DemInfo& info : infos) {
-            if (info.nodata) {
-                std::snprintf(value, sizeof value, "%.17g", *info.nodata);
-                break;
-            }
+        return *nodata;
+    }
+    for (const FileScan* f : files) {
+        if (f->info.nodata) {
+            return *f->info.nodata;
         }
     }
-    argv.reset(CSLAddString(argv.release(), "-vrtnodata"));
-    argv.reset(CSLAddString(argv.release(), value));
-    std::unique_ptr<GDALBuildVRTOptions, BuildVrtOptionsDeleter> options(
-        GDALBuildVRTOptionsNew(argv.get(), nullptr));
-    // Absolute: the VRT lives in /vsimem/, and GDAL reads names relative to where it lives.
-    std::vector<std::string> absolute;
-    for (auto p = paths.rbegin(); p != paths.rend(); ++p) {
-        absolute.push_back(p->starts_with("/vsi") ? *p : std::filesystem::absolute(*p).string());
+    return NAN;
+}
+
+// The mosaic's description from its files' scans. A file without a nodata value of its own
+// shows the mosaic's nodata value as a void too, so it is scanned again with that value.
+DemInfo describe_from_scans(const std::string& vrt,
+                            const std::vector<const FileScan*>& files,
+                            double fill,
+                            std::optional<double> nodata,
+                            const ValidRange& range) {
+    std::vector<FileScan> again;
+    again.reserve(files.size());
+    std::vector<const FileScan*> scans;
+    for (const FileScan* f : files) {
+        if (!f->info.nodata && std::isfinite(fill)) {
+            again.push_back(scan_file(f->info.path, INFINITY, fill, range));
+            scans.push_back(&again.back());
+        } else {
+            scans.push_back(f);
+        }
     }
-    std::vector<const char*> sources;
-    for (const auto& p : absolute) {
-        sources.push_back(p.c_str());
+    return describe_mosaic(vrt, scans, nodata, range);
+}
+
+// One in-memory VRT mosaic of files that share a CRS and a pixel size; the first given wins
+// where they overlap. Its heights' range comes from the files' scans when every file was
+// scanned, else from reading the mosaic (exact up to kExactRangeSamples).
+std::shared_ptr<const DemSource> open_mosaic(const std::vector<const FileScan*>& files,
+                                             std::optional<double> nodata,
+                                             const ValidRange& range) {
+    std::vector<std::string> paths;
+    bool scanned = true;
+    for (const FileScan* f : files) {
+        paths.push_back(f->info.path);
+        scanned = scanned && f->scanned;
     }
-    int usage_error = 0;
-    CPLErrorReset();
-    GDALDatasetUniquePtr vrt(GDALDataset::FromHandle(GDALBuildVRT("",
-                                                                  static_cast<int>(sources.size()),
-                                                                  nullptr,
-                                                                  sources.data(),
-                                                                  options.get(),
-                                                                  &usage_error)));
-    if (!vrt || usage_error) {
-        throw InputError(names + ": cannot be mosaicked (" + gdal_message() + ")");
-    }
-    char** xml = vrt->GetMetadata("xml:VRT");
-    if (!xml || !xml[0]) {
-        throw IoError(names + ": GDAL gave no VRT description of the mosaic");
-    }
-    auto file = std::make_shared<const MemoryFile>(xml[0]);
-    DemInfo info = inspect_dem(file->path(), kExactRangeSamples, nodata, range);
-    info.path = names;
+    const double fill = mosaic_nodata(files, nodata);
+    char fill_text[32];
+    std::snprintf(fill_text, sizeof fill_text, std::isnan(fill) ? "nan" : "%.17g", fill);
+    auto file = std::make_shared<const MemoryFile>(mosaic_vrt_xml(files, fill_text));
+    DemInfo info = scanned ? describe_from_scans(file->path(), files, fill, nodata, range)
+                           : inspect_dem(file->path(), kExactRangeSamples, nodata, range);
+    info.path = inputs_text(paths);
     info.files = paths;
     check_likely_nodata(info);
     warn_outliers(info);
@@ -1034,52 +1009,85 @@ std::shared_ptr<const DemSource> open_mosaic(const std::vector<std::string>& pat
 }
 
 // One group of group_by_grid, its files' heights read once: a file alone, or their mosaic.
-// `infos` are inspect_metadata's.
-std::shared_ptr<const DemSource> group_source(const std::vector<std::string>& files,
-                                              const std::vector<DemInfo>& infos,
+std::shared_ptr<const DemSource> group_source(const std::vector<const FileScan*>& files,
                                               std::optional<double> nodata,
                                               const ValidRange& range) {
     if (files.size() > 1) {
-        return open_mosaic(files, infos, nodata, range);
+        return open_mosaic(files, nodata, range);
     }
-    DemInfo info = inspect_dem(files[0], kExactRangeSamples, nodata, range);
-    info.files = files;
+    const FileScan& f = *files.front();
+    DemInfo info = f.scanned ? f.info : inspect_dem(f.info.path, kExactRangeSamples, nodata, range);
+    info.files = {f.info.path};
     check_likely_nodata(info);
     warn_outliers(info);
-    return std::make_shared<GdalDemSource>(files[0], std::move(info));
+    return std::make_shared<GdalDemSource>(f.info.path, std::move(info));
 }
 
 // The files in groups that one VRT can hold: one CRS, one pixel size, no rotation. Groups keep
 // the order of their first file, and files keep theirs within a group.
-std::vector<std::vector<std::size_t>> group_by_grid(const std::vector<std::string>& paths,
-                                                    const std::vector<DemInfo>& infos,
-                                                    const std::vector<OGRSpatialReference>& srs) {
-    const auto same_grid = [&](std::size_t a, std::size_t b) {
-        const auto& g = infos[a].geotransform;
-        const auto& h = infos[b].geotransform;
+std::vector<std::vector<const FileScan*>> group_by_grid(const std::vector<FileScan>& scans) {
+    const auto same_grid = [&](const FileScan& a, const FileScan& b) {
+        const auto& g = a.info.geotransform;
+        const auto& h = b.info.geotransform;
         // Pixel sizes that differ by a rounding (a re-export) drift less than 1 % of a pixel
         // across either file.
-        const double span =
-            std::max({infos[a].width, infos[a].height, infos[b].width, infos[b].height, 1});
+        const double span = std::max({a.info.width, a.info.height, b.info.width, b.info.height, 1});
         const auto close = [span](double x, double y) {
             return std::abs(x - y) * span <= 0.01 * std::max(std::abs(x), std::abs(y));
         };
         const char* options[] = {"IGNORE_DATA_AXIS_TO_SRS_AXIS_MAPPING=YES", nullptr};
         return g[2] == 0 && g[4] == 0 && h[2] == 0 && h[4] == 0 && close(g[1], h[1]) &&
-               close(g[5], h[5]) && srs[a].IsSame(&srs[b], options);
+               close(g[5], h[5]) && a.srs && b.srs && a.srs->IsSame(b.srs.get(), options);
     };
-    std::vector<std::vector<std::size_t>> groups;
-    for (std::size_t k = 0; k < paths.size(); ++k) {
+    std::vector<std::vector<const FileScan*>> groups;
+    for (const FileScan& scan : scans) {
         auto g = std::find_if(groups.begin(), groups.end(), [&](const auto& group) {
-            return same_grid(group.front(), k);
+            return same_grid(*group.front(), scan);
         });
         if (g == groups.end()) {
-            groups.push_back({k});
+            groups.push_back({&scan});
         } else {
-            g->push_back(k);
+            g->push_back(&scan);
         }
     }
     return groups;
+}
+
+// One file, opened once when its samples are few enough to read for the exact range.
+std::shared_ptr<const DemSource>
+open_one(const std::string& path, std::optional<double> nodata, const ValidRange& range) {
+    FileScan scan = scan_file(path, kExactRangeSamples, nodata, range);
+    DemInfo info =
+        scan.scanned ? std::move(scan.info) : inspect_dem(path, kExactRangeSamples, nodata, range);
+    info.files = {path};
+    check_likely_nodata(info);
+    warn_outliers(info);
+    return std::make_shared<GdalDemSource>(path, std::move(info));
+}
+
+// Every file opened once: described, checked, and its samples read for the exact range while
+// all the files' samples so far stay within kExactRangeSamples (beyond it, mosaics read their
+// range approximately).
+std::vector<FileScan> scan_files(const std::vector<std::string>& paths,
+                                 std::optional<double> nodata,
+                                 const ValidRange& range) {
+    if (paths.size() >= 1000) {
+        log::info("reading " + std::to_string(paths.size()) + " DEM files for their footprints " +
+                  "and height ranges");
+    }
+    std::vector<FileScan> scans;
+    scans.reserve(paths.size());
+    double budget = kExactRangeSamples;
+    for (const auto& path : paths) {
+        scans.push_back(scan_file(path, budget, nodata, range));
+        const DemInfo& info = scans.back().info;
+        budget = scans.back().scanned ? budget - double(info.width) * info.height : 0;
+        if (!info.has_geotransform || info.crs_name.empty()) {
+            throw InputError(path + ": has no georeferencing; a mosaic of several DEMs needs "
+                                    "a CRS and geotransform in each");
+        }
+    }
+    return scans;
 }
 
 } // namespace
@@ -1096,44 +1104,13 @@ std::shared_ptr<const DemSource> DemSource::open(const std::vector<std::string>&
         throw InputError("--nodata: expected a finite number (NaN and infinite samples are "
                          "always nodata)");
     }
-    // Several files are read for their heights as their groups, not one by one (group_source).
-    const bool one = paths.size() == 1;
-    std::vector<DemInfo> infos;
-    std::vector<OGRSpatialReference> srs; // each file's CRS, for group_by_grid
-    for (const auto& path : paths) {
-        infos.push_back(one ? inspect_dem(path, kExactRangeSamples, nodata, range)
-                            : inspect_metadata(path, nodata, range));
-        if (one) {
-            check_likely_nodata(infos.back());
-            warn_outliers(infos.back());
-        }
-        GDALDatasetUniquePtr ds(GDALDataset::Open(
-            path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY, nullptr, nullptr, nullptr));
-        if (!ds) {
-            throw InputError(path + ": not a raster GDAL can read (" + gdal_message() + ")");
-        }
-        check_band(path, *ds);
-        srs.push_back(ds->GetSpatialRef() ? *ds->GetSpatialRef() : OGRSpatialReference());
-    }
     if (paths.size() == 1) {
-        infos[0].files = paths;
-        return std::make_shared<GdalDemSource>(paths[0], infos[0]);
+        return open_one(paths[0], nodata, range);
     }
-    for (std::size_t k = 0; k < paths.size(); ++k) {
-        if (!infos[k].has_geotransform || infos[k].crs_name.empty()) {
-            throw InputError(paths[k] + ": has no georeferencing; a mosaic of several DEMs needs "
-                                        "a CRS and geotransform in each");
-        }
-    }
+    const std::vector<FileScan> scans = scan_files(paths, nodata, range);
     std::vector<std::shared_ptr<const DemSource>> members;
-    for (const auto& group : group_by_grid(paths, infos, srs)) {
-        std::vector<std::string> files;
-        std::vector<DemInfo> group_infos;
-        for (std::size_t k : group) {
-            files.push_back(paths[k]);
-            group_infos.push_back(infos[k]);
-        }
-        members.push_back(group_source(files, group_infos, nodata, range));
+    for (const auto& group : group_by_grid(scans)) {
+        members.push_back(group_source(group, nodata, range));
     }
     if (members.size() == 1) {
         return members.front();

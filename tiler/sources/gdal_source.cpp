@@ -50,24 +50,6 @@ std::string printable(const std::string& s) {
     return out;
 }
 
-// What a pass over band 1 found, in heights (to_height applied). second_min is the smallest
-// height above min (NaN when there is none), second_max the largest below max.
-struct SampleStats {
-    std::int64_t valid = 0;
-    double min = INFINITY, max = -INFINITY;
-    std::int64_t at_min = 0, at_max = 0;
-    double second_min = INFINITY, second_max = -INFINITY;
-};
-
-// What scan_band found: every sample that is not nodata (for undeclared voids, which may lie
-// outside the plausible range), the heights within it, and the outliers.
-struct BandStats {
-    SampleStats all, heights;
-    std::int64_t outliers = 0;
-    std::int64_t outlier_column = 0, outlier_row = 0;
-    double outlier_height = 0;
-};
-
 void add_sample(SampleStats& s, double h) {
     ++s.valid;
     if (h < s.min) {
@@ -213,40 +195,116 @@ std::size_t block_cache_mb() {
 
 namespace {
 
-// inspect_dem, or with `scan` false inspect_metadata.
-DemInfo describe_file(const std::string& path,
-                      double exact_range_samples,
-                      std::optional<double> nodata_override,
-                      const ValidRange& range,
-                      bool scan) {
-    init_gdal();
+// Refuses a path before any driver sees it: a NUL byte, a missing file, a directory, a file that
+// cannot be read (some drivers, SRTMHGT, recognize a file by its name and crash on one they
+// cannot read). Virtual paths (/vsi..., a VRT's XML text) are left to GDAL.
+void check_path(const std::string& path) {
     namespace fs = std::filesystem;
     if (path.find('\0') != std::string::npos) {
         throw InputError(printable(path) + ": the path holds a NUL byte; name the file without it");
     }
-    const bool vrt_xml = path.find('<') != std::string::npos; // a mosaic's VRT description
-    const bool virtual_path = path.rfind("/vsi", 0) == 0 || vrt_xml;
-    if (!virtual_path) {
-        std::error_code ec;
-        const auto status = fs::status(path, ec);
-        if (!fs::exists(status)) {
-            throw InputError(path + ": no such file; check the path");
-        }
-        if (fs::is_directory(status)) {
-            throw InputError(path + ": is a directory, not a raster; name a DEM file");
-        }
-        // Some drivers (SRTMHGT) recognize a file by its name and crash on one they cannot
-        // read, so find out first.
-        const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
-        if (fd < 0) {
-            const int err = errno;
-            throw IoError(path + ": cannot be read (" + std::strerror(err) + ")" +
-                          (err == EACCES || err == EPERM
-                               ? "; fix its permissions (chmod a+r) or run as its owner"
-                               : "; check the file"));
-        }
-        ::close(fd);
+    if (path.rfind("/vsi", 0) == 0 || path.find('<') != std::string::npos) {
+        return;
     }
+    std::error_code ec;
+    const auto status = fs::status(path, ec);
+    if (!fs::exists(status)) {
+        throw InputError(path + ": no such file; check the path");
+    }
+    if (fs::is_directory(status)) {
+        throw InputError(path + ": is a directory, not a raster; name a DEM file");
+    }
+    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
+    if (fd < 0) {
+        const int err = errno;
+        throw IoError(path + ": cannot be read (" + std::strerror(err) + ")" +
+                      (err == EACCES || err == EPERM
+                           ? "; fix its permissions (chmod a+r) or run as its owner"
+                           : "; check the file"));
+    }
+    ::close(fd);
+}
+
+// The lon/lat bounds of the raster's densified outline, so projected sources get honest ones.
+std::optional<std::array<double, 4>> lonlat_outline(const DemInfo& info,
+                                                    const OGRSpatialReference& srs) {
+    OGRSpatialReference wgs84;
+    wgs84.SetWellKnownGeogCS("WGS84");
+    wgs84.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    OGRSpatialReference source(srs);
+    source.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    std::unique_ptr<OGRCoordinateTransformation> ct(
+        OGRCreateCoordinateTransformation(&source, &wgs84));
+    if (!ct) {
+        return std::nullopt;
+    }
+    const auto& g = info.geotransform;
+    double west = INFINITY, south = INFINITY, east = -INFINITY, north = -INFINITY;
+    constexpr int kSteps = 16;
+    for (int i = 0; i <= kSteps; ++i) {
+        const double f = static_cast<double>(i) / kSteps;
+        const double px[4] = {f * info.width, f * info.width, 0.0, double(info.width)};
+        const double py[4] = {0.0, double(info.height), f * info.height, f * info.height};
+        for (int side = 0; side < 4; ++side) {
+            double x = g[0] + px[side] * g[1] + py[side] * g[2];
+            double y = g[3] + px[side] * g[4] + py[side] * g[5];
+            if (ct->Transform(1, &x, &y)) {
+                west = std::min(west, x), east = std::max(east, x);
+                south = std::min(south, y), north = std::max(north, y);
+            }
+        }
+    }
+    if (!std::isfinite(west) || !std::isfinite(south)) {
+        return std::nullopt;
+    }
+    return std::array<double, 4>{west, south, east, north};
+}
+
+// The CRS's names and the lon/lat bounds.
+void describe_crs(DemInfo& info, const OGRSpatialReference& srs) {
+    info.crs_name = srs.GetName() ? srs.GetName() : "";
+    info.geographic = srs.IsGeographic();
+    OGRSpatialReference copy(srs);
+    if (copy.AutoIdentifyEPSG() == OGRERR_NONE || copy.GetAuthorityCode(nullptr)) {
+        const char* auth = copy.GetAuthorityName(nullptr);
+        const char* code = copy.GetAuthorityCode(nullptr);
+        if (auth && code) {
+            info.crs_id = std::string(auth) + ":" + code;
+        }
+    }
+    if (info.has_geotransform) {
+        info.lonlat_bounds = lonlat_outline(info, srs);
+    }
+}
+
+// The approximate ground size of one pixel, metres.
+double pixel_size_m(const DemInfo& info, const OGRSpatialReference* srs) {
+    const auto& g = info.geotransform;
+    const double dx = std::hypot(g[1], g[4]);
+    const double dy = std::hypot(g[2], g[5]);
+    double size = std::sqrt(dx * dy);
+    if (info.geographic && info.lonlat_bounds) {
+        const auto& b = *info.lonlat_bounds;
+        const double lat = 0.5 * (b[1] + b[3]) * M_PI / 180.0;
+        constexpr double kMetresPerDegree = 6378137.0 * M_PI / 180.0;
+        size = std::sqrt(dx * std::cos(lat) * dy) * kMetresPerDegree;
+    } else if (srs) {
+        size *= srs->GetLinearUnits();
+    }
+    return size;
+}
+
+struct Described {
+    GDALDatasetUniquePtr ds;
+    DemInfo info;
+};
+
+// Opens `path` and describes band 1 without reading a sample (inspect_metadata).
+Described open_described(const std::string& path,
+                         std::optional<double> nodata_override,
+                         const ValidRange& range) {
+    init_gdal();
+    check_path(path);
     CPLErrorReset();
     GDALDatasetUniquePtr ds(GDALDataset::Open(
         path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY | GDAL_OF_VERBOSE_ERROR, nullptr, nullptr));
@@ -266,7 +324,7 @@ DemInfo describe_file(const std::string& path,
     GDALRasterBand* band = ds->GetRasterBand(1);
     info.data_type = GDALGetDataTypeName(band->GetRasterDataType());
     int has = 0;
-    double nodata = band->GetNoDataValue(&has);
+    const double nodata = band->GetNoDataValue(&has);
     if (nodata_override) {
         info.nodata = nodata_override;
         info.nodata_given = true;
@@ -274,102 +332,22 @@ DemInfo describe_file(const std::string& path,
         info.nodata = nodata;
     }
     info.scale = band->GetScale(&has);
-    if (!has) {
-        info.scale = 1.0;
-    }
+    info.scale = has ? info.scale : 1.0;
     info.offset = band->GetOffset(&has);
-    if (!has) {
-        info.offset = 0.0;
-    }
+    info.offset = has ? info.offset : 0.0;
     info.has_geotransform = ds->GetGeoTransform(info.geotransform.data()) == CE_None;
-
-    if (const OGRSpatialReference* srs = ds->GetSpatialRef()) {
-        info.crs_name = srs->GetName() ? srs->GetName() : "";
-        info.geographic = srs->IsGeographic();
-        OGRSpatialReference copy(*srs);
-        if (copy.AutoIdentifyEPSG() == OGRERR_NONE || copy.GetAuthorityCode(nullptr)) {
-            const char* auth = copy.GetAuthorityName(nullptr);
-            const char* code = copy.GetAuthorityCode(nullptr);
-            if (auth && code) {
-                info.crs_id = std::string(auth) + ":" + code;
-            }
-        }
-        if (info.has_geotransform) {
-            OGRSpatialReference wgs84;
-            wgs84.SetWellKnownGeogCS("WGS84");
-            wgs84.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
-            OGRSpatialReference source(*srs);
-            source.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
-            std::unique_ptr<OGRCoordinateTransformation> ct(
-                OGRCreateCoordinateTransformation(&source, &wgs84));
-            if (ct) {
-                const auto& g = info.geotransform;
-                // Densified outline of the raster, so projected sources get honest bounds.
-                double west = INFINITY, south = INFINITY, east = -INFINITY, north = -INFINITY;
-                constexpr int kSteps = 16;
-                for (int i = 0; i <= kSteps; ++i) {
-                    for (int side = 0; side < 4; ++side) {
-                        double px = 0, py = 0;
-                        const double f = static_cast<double>(i) / kSteps;
-                        switch (side) {
-                        case 0:
-                            px = f * info.width, py = 0;
-                            break;
-                        case 1:
-                            px = f * info.width, py = info.height;
-                            break;
-                        case 2:
-                            px = 0, py = f * info.height;
-                            break;
-                        default:
-                            px = info.width, py = f * info.height;
-                            break;
-                        }
-                        double x = g[0] + px * g[1] + py * g[2];
-                        double y = g[3] + px * g[4] + py * g[5];
-                        if (ct->Transform(1, &x, &y)) {
-                            west = std::min(west, x), east = std::max(east, x);
-                            south = std::min(south, y), north = std::max(north, y);
-                        }
-                    }
-                }
-                if (std::isfinite(west) && std::isfinite(south)) {
-                    info.lonlat_bounds = std::array<double, 4>{west, south, east, north};
-                }
-            }
-        }
+    const OGRSpatialReference* srs = ds->GetSpatialRef();
+    if (srs) {
+        describe_crs(info, *srs);
     }
     if (info.has_geotransform) {
-        const auto& g = info.geotransform;
-        double dx = std::hypot(g[1], g[4]);
-        double dy = std::hypot(g[2], g[5]);
-        double size = std::sqrt(dx * dy);
-        if (info.geographic && info.lonlat_bounds) {
-            const auto& b = *info.lonlat_bounds;
-            const double lat = 0.5 * (b[1] + b[3]) * M_PI / 180.0;
-            constexpr double kMetresPerDegree = 6378137.0 * M_PI / 180.0;
-            size = std::sqrt(dx * std::cos(lat) * dy) * kMetresPerDegree;
-        } else if (const OGRSpatialReference* srs = ds->GetSpatialRef()) {
-            size *= srs->GetLinearUnits();
-        }
-        info.resolution_m = size;
+        info.resolution_m = pixel_size_m(info, srs);
     }
-    if (!scan) {
-        return info;
-    }
+    return {std::move(ds), std::move(info)};
+}
 
-    // Exact min/max over valid samples (metadata statistics are not trusted: some files carry
-    // stale ones). Tileset bounding volumes are built from it, so an approximate range is only
-    // taken where reading everything would hold up every start for long.
-    const double samples = static_cast<double>(info.width) * info.height;
-    const bool approx = samples > exact_range_samples;
-    info.range_exact = !approx;
-    if (!approx && samples > 64e6) {
-        log::info((vrt_xml ? std::string("the mosaic") : path) + ": reading all " +
-                  std::to_string(std::llround(samples / 1e6)) +
-                  " Mpixel once for the exact height range");
-    }
-    const BandStats stats = scan_band(info, *band, approx);
+// What a scan found, into the description.
+void take_stats(DemInfo& info, const BandStats& stats) {
     if (stats.all.valid > 0) {
         find_likely_nodata(info, stats.all);
     }
@@ -382,21 +360,145 @@ DemInfo describe_file(const std::string& path,
     info.outlier_column = stats.outlier_column;
     info.outlier_row = stats.outlier_row;
     info.outlier_height = stats.outlier_height;
-    return info;
+}
+
+// Exact min/max over valid samples (metadata statistics are not trusted: some files carry
+// stale ones). Tileset bounding volumes are built from it, so an approximate range is only
+// taken where reading everything would hold up every start for long.
+BandStats scan_for_range(DemInfo& info, GDALRasterBand& band, double exact_range_samples) {
+    const double samples = static_cast<double>(info.width) * info.height;
+    const bool approx = samples > exact_range_samples;
+    info.range_exact = !approx;
+    if (!approx && samples > 64e6) {
+        const bool mosaic = info.path.rfind("/vsimem/", 0) == 0;
+        log::info((mosaic ? std::string("the mosaic") : info.path) + ": reading all " +
+                  std::to_string(std::llround(samples / 1e6)) +
+                  " Mpixel once for the exact height range");
+    }
+    return scan_band(info, band, approx);
+}
+
+// One end of two scans' statistics merged: `beyond` is < for the minimum, > for the maximum.
+template <typename Beyond>
+void merge_end(double& end,
+               std::int64_t& at,
+               double& next,
+               double other_end,
+               std::int64_t other_at,
+               double other_next,
+               Beyond beyond) {
+    if (beyond(other_end, end)) {
+        next = beyond(end, other_next) ? end : other_next;
+        end = other_end, at = other_at;
+    } else if (other_end == end) {
+        at += other_at;
+        next = beyond(next, other_next) ? next : other_next;
+    } else {
+        next = beyond(next, other_end) ? next : other_end;
+    }
+}
+
+void merge_stats(SampleStats& a, const SampleStats& b) {
+    if (b.valid == 0) {
+        return;
+    }
+    if (a.valid == 0) {
+        a = b;
+        return;
+    }
+    a.valid += b.valid;
+    merge_end(a.min, a.at_min, a.second_min, b.min, b.at_min, b.second_min, std::less<>());
+    merge_end(a.max, a.at_max, a.second_max, b.max, b.at_max, b.second_max, std::greater<>());
+}
+
+// Rejects what is not a height band: complex numbers, colour images (RGB(A), palettes; e.g.
+// Terrain-RGB PNGs must be decoded to heights first).
+void check_height_band(const std::string& name, GDALDataset& ds) {
+    GDALRasterBand* band = ds.GetRasterBand(1);
+    const GDALDataType type = band->GetRasterDataType();
+    if (GDALDataTypeIsComplex(type)) {
+        throw InputError(name + ": band 1 holds complex numbers (" + GDALGetDataTypeName(type) +
+                         "), not heights; convert it to a real type");
+    }
+    const GDALColorInterp colour = band->GetColorInterpretation();
+    if (colour == GCI_PaletteIndex || colour == GCI_RedBand ||
+        (type == GDT_Byte && ds.GetRasterCount() >= 3)) {
+        throw InputError(
+            name + ": is a colour image (RGB(A) or palette), not a height raster; decode it "
+                   "to heights first (e.g. Terrain-RGB: -10000 + (R*65536 + G*256 + B) * 0.1)");
+    }
 }
 
 } // namespace
+
+FileScan scan_file(const std::string& path,
+                   double max_samples,
+                   std::optional<double> nodata,
+                   const ValidRange& range) {
+    Described d = open_described(path, nodata, range);
+    check_height_band(path, *d.ds);
+    FileScan scan;
+    GDALRasterBand* band = d.ds->GetRasterBand(1);
+    band->GetBlockSize(&scan.block_width, &scan.block_height);
+    for (int k = 0; k < band->GetOverviewCount(); ++k) {
+        GDALRasterBand* overview = band->GetOverview(k);
+        if (overview && overview->GetXSize() > 0) {
+            scan.overview_factors.push_back(static_cast<int>(
+                std::lround(static_cast<double>(d.info.width) / overview->GetXSize())));
+        }
+    }
+    if (const OGRSpatialReference* srs = d.ds->GetSpatialRef()) {
+        scan.srs = std::make_shared<const OGRSpatialReference>(*srs);
+    }
+    if (static_cast<double>(d.info.width) * d.info.height <= max_samples) {
+        scan.stats = scan_for_range(d.info, *band, INFINITY);
+        take_stats(d.info, scan.stats);
+        scan.scanned = true;
+    }
+    scan.info = std::move(d.info);
+    return scan;
+}
+
+DemInfo describe_mosaic(const std::string& vrt,
+                        const std::vector<const FileScan*>& files,
+                        std::optional<double> nodata,
+                        const ValidRange& range) {
+    DemInfo info = open_described(vrt, nodata, range).info;
+    BandStats all;
+    const auto& m = info.geotransform;
+    for (const FileScan* f : files) {
+        TB_ASSERT(f->scanned);
+        merge_stats(all.all, f->stats.all);
+        merge_stats(all.heights, f->stats.heights);
+        if (all.outliers == 0 && f->stats.outliers > 0) {
+            // The first outlier, as a pixel of the mosaic.
+            const auto& g = f->info.geotransform;
+            const double x = g[0] + (static_cast<double>(f->stats.outlier_column) + 0.5) * g[1];
+            const double y = g[3] + (static_cast<double>(f->stats.outlier_row) + 0.5) * g[5];
+            all.outlier_column = static_cast<std::int64_t>(std::floor((x - m[0]) / m[1]));
+            all.outlier_row = static_cast<std::int64_t>(std::floor((y - m[3]) / m[5]));
+            all.outlier_height = f->stats.outlier_height;
+        }
+        all.outliers += f->stats.outliers;
+    }
+    info.range_exact = true;
+    take_stats(info, all);
+    return info;
+}
 
 DemInfo inspect_dem(const std::string& path,
                     double exact_range_samples,
                     std::optional<double> nodata,
                     const ValidRange& range) {
-    return describe_file(path, exact_range_samples, nodata, range, true);
+    Described d = open_described(path, nodata, range);
+    const BandStats stats = scan_for_range(d.info, *d.ds->GetRasterBand(1), exact_range_samples);
+    take_stats(d.info, stats);
+    return std::move(d.info);
 }
 
 DemInfo
 inspect_metadata(const std::string& path, std::optional<double> nodata, const ValidRange& range) {
-    return describe_file(path, 0, nodata, range, false);
+    return open_described(path, nodata, range).info;
 }
 
 } // namespace tb::tiler

@@ -5,6 +5,7 @@
 #include "tiler/tile_grid.hpp"
 
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -12,6 +13,8 @@
 #include <string>
 #include <string_view>
 #include <vector>
+
+class OGRSpatialReference;
 
 namespace tb::tiler {
 
@@ -108,6 +111,50 @@ DemInfo inspect_dem(const std::string& path,
 DemInfo inspect_metadata(const std::string& path,
                          std::optional<double> nodata = std::nullopt,
                          const ValidRange& range = {});
+
+// What a pass over band 1 found, in heights (to_height applied). second_min is the smallest
+// height above min (infinite when there is none), second_max the largest below max.
+struct SampleStats {
+    std::int64_t valid = 0;
+    double min = INFINITY, max = -INFINITY;
+    std::int64_t at_min = 0, at_max = 0;
+    double second_min = INFINITY, second_max = -INFINITY;
+};
+
+// Every sample that is not nodata (for undeclared voids, which may lie outside the plausible
+// range), the heights within it, and the outliers (the first one's pixel and height).
+struct BandStats {
+    SampleStats all, heights;
+    std::int64_t outliers = 0;
+    std::int64_t outlier_column = 0, outlier_row = 0;
+    double outlier_height = 0;
+};
+
+// One file of several, opened once: what inspect_metadata says of it, band 1's block size and
+// overviews, its CRS (null without one), and, when `scanned`, every sample's statistics, to merge
+// into its mosaic's (describe_mosaic). Band 1 is checked to hold heights, as DemSource::open does.
+struct FileScan {
+    DemInfo info;
+    int block_width = 0, block_height = 0;
+    std::vector<int> overview_factors; // band 1's overviews: file pixels per overview pixel
+    std::shared_ptr<const OGRSpatialReference> srs;
+    bool scanned = false;
+    BandStats stats;
+};
+// Scans the samples when the file holds at most `max_samples` of them.
+FileScan scan_file(const std::string& path,
+                   double max_samples,
+                   std::optional<double> nodata,
+                   const ValidRange& range);
+
+// A mosaic described from the files it draws (every one scanned): its size, CRS and
+// georeferencing from `vrt` (its VRT, no sample read), its height range, outliers and undeclared
+// voids from its files' statistics merged. Pixels that another file hides count too, so the
+// range may be wider than what the mosaic shows, never narrower.
+DemInfo describe_mosaic(const std::string& vrt,
+                        const std::vector<const FileScan*>& files,
+                        std::optional<double> nodata,
+                        const ValidRange& range);
 
 // Registers GDAL drivers once and routes GDAL's error handler to our logger. Idempotent. GDAL's
 // block cache starts at kDefaultBlockCacheMb unless GDAL_CACHEMAX is set (GDAL's own default,
