@@ -5,7 +5,7 @@
 // Exits 1 if any achieved_max_err > eps: the bound is the product, speed is secondary.
 //
 // usage: mesh_bench [--reps N] [--effort fast|balanced|best|all] [--json DIR] [--phases]
-//                   [--threads 1|2] INPUT EPS[,EPS...] [INPUT EPS... ...]
+//                   [--threads 1|2] [--no-check] INPUT EPS[,EPS...] [INPUT EPS... ...]
 //   INPUT = NAME=FILE.f32:W:H  raw little-endian float32, row-major (shared/bench format)
 //         | synth:SEED:W:H     seeded synthetic terrain (ridges + noise, 0.1 height steps)
 // --effort picks core's TriangulateOptions::effort (default best, core's default); `all` runs
@@ -13,6 +13,9 @@
 // for each (fast, balanced, best).
 // --threads sets TriangulateOptions::threads (default 2, core's default; the mesh is the same
 // for 1).
+// --no-check times triangulate without its final exact error pass (TriangulateOptions::
+// check_error off, as the tiler runs it). Every mesh is still measured by max_error after the
+// timing, and the script still runs linf_check on it.
 // --json DIR writes every mesh as DIR/NAME-epsE-LEVEL.json for shared/bench's linf_check.
 // --phases prints instead, per case, where the fastest run's time went (core's
 // TriangulatePhases; phases_ms is their sum):  input size eps phases_ms triangles anchors_ms
@@ -131,6 +134,7 @@ int main(int argc, char** argv) {
     int reps = 3;
     int threads = 2;
     bool phases = false;
+    bool check_error = true;
     std::vector<tb::core::Effort> levels{tb::core::Effort::Best};
     std::string json_dir;
     std::vector<std::string> args(argv + 1, argv + argc);
@@ -157,6 +161,9 @@ int main(int argc, char** argv) {
             threads = std::stoi(args[i + 1]);
             args.erase(args.begin() + static_cast<std::ptrdiff_t>(i),
                        args.begin() + static_cast<std::ptrdiff_t>(i) + 2);
+        } else if (args[i] == "--no-check") {
+            check_error = false;
+            args.erase(args.begin() + static_cast<std::ptrdiff_t>(i));
         } else if (args[i] == "--phases") {
             phases = true;
             args.erase(args.begin() + static_cast<std::ptrdiff_t>(i));
@@ -174,7 +181,7 @@ int main(int argc, char** argv) {
     }
     if (args.empty() || args.size() % 2 != 0) {
         std::cerr << "usage: mesh_bench [--reps N] [--effort fast|balanced|best|all] [--json DIR]"
-                     " [--phases] [--threads 1|2] INPUT EPS[,EPS...] ...\n"
+                     " [--phases] [--threads 1|2] [--no-check] INPUT EPS[,EPS...] ...\n"
                      "  INPUT = NAME=FILE.f32:W:H | synth:SEED:W:H\n";
         return 2;
     }
@@ -208,7 +215,11 @@ int main(int argc, char** argv) {
                     const auto t0 = std::chrono::steady_clock::now();
                     meshes[l] = tb::core::triangulate(
                         g,
-                        {.eps = eps, .lock_border = true, .effort = levels[l], .threads = threads},
+                        {.eps = eps,
+                         .lock_border = true,
+                         .check_error = check_error,
+                         .effort = levels[l],
+                         .threads = threads},
                         phases ? &run : nullptr);
                     const auto t1 = std::chrono::steady_clock::now();
                     times[l].push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());

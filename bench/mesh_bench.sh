@@ -4,7 +4,8 @@
 # binary. Every effort level of ours (core::Effort) in the same run. Not a test.
 #
 #   [HMM=/path/to/hmm] bench/mesh_bench.sh [--reps N] [--quick] [--effort fast|balanced|best|all]
-#                                          [--threads 1|2] [--svg FILE] [--instructions] [--phases]
+#                                          [--threads 1|2] [--no-check] [--svg FILE] [--instructions]
+#                                          [--phases]
 #
 # Builds bench/mesh_bench with Release flags into build-bench (core/ alone), copies
 # ../shared/bench (read-only) to bench/runs/peer (git-ignored), installs delatin there with
@@ -25,6 +26,9 @@
 # (2^18 samples and more) the mesher splits its fits, first scan, merge passes and final check
 # in two halves, on two threads with 2 and one after the other with 1 (the same meshes).
 # --instructions always counts with 1 (callgrind would not count the second thread's work).
+# --no-check times our mesher without its final exact error pass (TriangulateOptions::
+# check_error off), as the tiler runs it: hmm has no such pass. Every mesh is still measured
+# after the timing, by mesh_bench's own exact pass and by linf_check.
 # --svg FILE then draws triangles against time per case (bench/mesh_curve.mjs): our levels as
 # a curve, hmm and delatin as marks, both axes as ratios to hmm (to delatin without HMM).
 # --instructions then counts, under valgrind's callgrind, the instructions each mesher executes
@@ -57,6 +61,7 @@ instructions=0
 phases=0
 effort=all
 threads=2
+check=()
 svg=
 while [ $# -gt 0 ]; do
     case $1 in
@@ -64,12 +69,13 @@ while [ $# -gt 0 ]; do
         --quick) quick=1; shift ;;
         --effort) effort=$2; shift 2 ;;
         --threads) threads=$2; shift 2 ;;
+        --no-check) check=(--no-check); shift ;;
         --svg) svg=$2; shift 2 ;;
         --instructions) instructions=1; shift ;;
         --phases) phases=1; shift ;;
         *) echo "usage: [HMM=/path/to/hmm] $0 [--reps N] [--quick]" \
-               "[--effort fast|balanced|best|all] [--threads 1|2] [--svg FILE] [--instructions]" \
-               "[--phases]" >&2
+               "[--effort fast|balanced|best|all] [--threads 1|2] [--no-check] [--svg FILE]" \
+               "[--instructions] [--phases]" >&2
            exit 2 ;;
     esac
 done
@@ -171,7 +177,7 @@ for c in "${cases[@]}"; do
         for eps in ${epss//,/ }; do
             json=()
             [ "$r" = 0 ] && json=(--json "$runs/meshes")
-            lines=$("$bench" --reps 1 --effort "$effort" --threads "$threads" "${json[@]}" \
+            lines=$("$bench" --reps 1 --effort "$effort" --threads "$threads" "${check[@]}" "${json[@]}" \
                 "$name=data/$name.f32:$size:$size" "$eps" | tail -n +2) || status=1
             [ "$r" = 0 ] && ours+="$lines"$'\n'
             while IFS=$'\t' read -r _ _ _ t _ _ _ _ level; do
@@ -269,7 +275,7 @@ if [ "$phases" = 1 ]; then
     printf '\tto_split_speed\tmerge_of_hmm\n'
     for c in "${cases[@]}"; do
         read -r name size epss <<< "$c"
-        "$bench" --phases --reps "$reps" --effort "$effort" --threads "$threads" \
+        "$bench" --phases --reps "$reps" --effort "$effort" --threads "$threads" "${check[@]}" \
             "$name=data/$name.f32:$size:$size" \
             "$epss" | tail -n +2 |
             while IFS=$'\t' read -r _ sz eps ms _ an st fs sp rs rn mg fin _ stris _ _ level; do
