@@ -410,6 +410,29 @@ TEST_CASE("undeclared voids in a mosaic are found in its files' statistics merge
     CHECK(tb::tiler::DemSource::open(paths, -32767.0)->info().min_height == 100);
 }
 
+TEST_CASE("of several bad files, the error names the first given, however they are read") {
+    ScratchDir dir;
+    // Files are opened on several threads; the error must not depend on which finishes first.
+    std::vector<std::string> paths;
+    for (int k = 0; k < 40; ++k) {
+        Fixture f = hills(33, GDT_Int16);
+        (*f.geotransform)[0] += 0.5 * k;
+        paths.push_back(tb_test::write_fixture(dir.file("c" + std::to_string(k) + ".tif"), f));
+    }
+    std::ofstream(dir.file("text.tif")) << "not a raster\n";
+    paths[17] = dir.file("gone.tif");
+    paths[23] = dir.file("text.tif");
+    for (int round = 0; round < 5; ++round) {
+        std::string message;
+        try {
+            tb::tiler::DemSource::open(paths);
+        } catch (const tb::InputError& e) {
+            message = e.what();
+        }
+        CHECK(message == paths[17] + ": no such file; check the path");
+    }
+}
+
 TEST_CASE("a sea at 0 m beside land, or a plateau, is not taken for undeclared voids") {
     ScratchDir dir;
     Fixture f = hills(129);

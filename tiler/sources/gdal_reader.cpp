@@ -1,6 +1,8 @@
 // Reading DEMs for tiles: band 1 of one file or of an in-memory VRT mosaic, sampled bilinearly
 // at the global lattice of a zoom, one GDAL handle per concurrent reader.
 #include "core/error.hpp"
+#include "tiler/cpus.hpp"
+#include "tiler/helper_threads.hpp"
 #include "tiler/layer.hpp"
 #include "tiler/log.hpp"
 #include "tiler/sources/collection_source.hpp"
@@ -20,6 +22,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <exception>
 #include <filesystem>
 #include <mutex>
 #include <set>
@@ -974,7 +977,8 @@ DemInfo describe_from_scans(const std::string& vrt,
     std::vector<const FileScan*> scans;
     for (const FileScan* f : files) {
         if (!f->info.nodata && std::isfinite(fill)) {
-            again.push_back(scan_file(f->info.path, INFINITY, fill, range));
+            again.push_back(scan_file(
+                f->info.path, [](double) { return true; }, fill, range));
             scans.push_back(&again.back());
         } else {
             scans.push_back(f);
@@ -984,23 +988,23 @@ DemInfo describe_from_scans(const std::string& vrt,
 }
 
 // One in-memory VRT mosaic of files that share a CRS and a pixel size; the first given wins
-// where they overlap. Its heights' range comes from the files' scans when every file was
-// scanned, else from reading the mosaic (exact up to kExactRangeSamples).
+// where they overlap. Its heights' range comes from the files' scans with `use_scans` (every
+// file was scanned), else from reading the mosaic (exact up to kExactRangeSamples).
 std::shared_ptr<const DemSource> open_mosaic(const std::vector<const FileScan*>& files,
+                                             bool use_scans,
                                              std::optional<double> nodata,
                                              const ValidRange& range) {
     std::vector<std::string> paths;
-    bool scanned = true;
     for (const FileScan* f : files) {
         paths.push_back(f->info.path);
-        scanned = scanned && f->scanned;
+        TB_ASSERT(f->scanned || !use_scans);
     }
     const double fill = mosaic_nodata(files, nodata);
     char fill_text[32];
     std::snprintf(fill_text, sizeof fill_text, std::isnan(fill) ? "nan" : "%.17g", fill);
     auto file = std::make_shared<const MemoryFile>(mosaic_vrt_xml(files, fill_text));
-    DemInfo info = scanned ? describe_from_scans(file->path(), files, fill, nodata, range)
-                           : inspect_dem(file->path(), kExactRangeSamples, nodata, range);
+    DemInfo info = use_scans ? describe_from_scans(file->path(), files, fill, nodata, range)
+                             : inspect_dem(file->path(), kExactRangeSamples, nodata, range);
     info.path = inputs_text(paths);
     info.files = paths;
     check_likely_nodata(info);
@@ -1008,12 +1012,14 @@ std::shared_ptr<const DemSource> open_mosaic(const std::vector<const FileScan*>&
     return std::make_shared<GdalDemSource>(file->path(), std::move(info), std::move(file));
 }
 
-// One group of group_by_grid, its files' heights read once: a file alone, or their mosaic.
+// One group of group_by_grid, its files' heights read once: a file alone (the same from its
+// scan or read again), or their mosaic.
 std::shared_ptr<const DemSource> group_source(const std::vector<const FileScan*>& files,
+                                              bool use_scans,
                                               std::optional<double> nodata,
                                               const ValidRange& range) {
     if (files.size() > 1) {
-        return open_mosaic(files, nodata, range);
+        return open_mosaic(files, use_scans, nodata, range);
     }
     const FileScan& f = *files.front();
     DemInfo info = f.scanned ? f.info : inspect_dem(f.info.path, kExactRangeSamples, nodata, range);
@@ -1056,7 +1062,8 @@ std::vector<std::vector<const FileScan*>> group_by_grid(const std::vector<FileSc
 // One file, opened once when its samples are few enough to read for the exact range.
 std::shared_ptr<const DemSource>
 open_one(const std::string& path, std::optional<double> nodata, const ValidRange& range) {
-    FileScan scan = scan_file(path, kExactRangeSamples, nodata, range);
+    FileScan scan = scan_file(
+        path, [](double samples) { return samples <= kExactRangeSamples; }, nodata, range);
     DemInfo info =
         scan.scanned ? std::move(scan.info) : inspect_dem(path, kExactRangeSamples, nodata, range);
     info.files = {path};
@@ -1065,29 +1072,62 @@ open_one(const std::string& path, std::optional<double> nodata, const ValidRange
     return std::make_shared<GdalDemSource>(path, std::move(info));
 }
 
-// Every file opened once: described, checked, and its samples read for the exact range while
-// all the files' samples so far stay within kExactRangeSamples (beyond it, mosaics read their
-// range approximately).
-std::vector<FileScan> scan_files(const std::vector<std::string>& paths,
-                                 std::optional<double> nodata,
-                                 const ValidRange& range) {
+// Every file opened once, on each usable CPU: described, checked, and its samples read for the
+// exact range while the samples read so far stay within kExactRangeSamples. Whether a mosaic's
+// range comes from its files' scans is decided from all the files' samples (`use_scans`), never
+// from which were read first, so the layer is the same from run to run; so is the error thrown
+// (the first file's in the order given).
+struct Scans {
+    std::vector<FileScan> files;
+    bool use_scans = true;
+};
+
+Scans scan_files(const std::vector<std::string>& paths,
+                 std::optional<double> nodata,
+                 const ValidRange& range) {
     if (paths.size() >= 1000) {
         log::info("reading " + std::to_string(paths.size()) + " DEM files for their footprints " +
                   "and height ranges");
     }
-    std::vector<FileScan> scans;
-    scans.reserve(paths.size());
-    double budget = kExactRangeSamples;
-    for (const auto& path : paths) {
-        scans.push_back(scan_file(path, budget, nodata, range));
-        const DemInfo& info = scans.back().info;
-        budget = scans.back().scanned ? budget - double(info.width) * info.height : 0;
-        if (!info.has_geotransform || info.crs_name.empty()) {
-            throw InputError(path + ": has no georeferencing; a mosaic of several DEMs needs "
-                                    "a CRS and geotransform in each");
+    Scans out;
+    out.files.resize(paths.size());
+    std::vector<std::exception_ptr> errors(paths.size());
+    std::atomic<std::size_t> next{0};
+    std::atomic<double> budget{kExactRangeSamples};
+    const auto may_scan = [&](double samples) { return budget.fetch_sub(samples) >= samples; };
+    const auto work = [&] {
+        for (std::size_t k; (k = next++) < paths.size();) {
+            try {
+                out.files[k] = scan_file(paths[k], may_scan, nodata, range);
+            } catch (...) {
+                errors[k] = std::current_exception();
+            }
         }
+    };
+    std::vector<Beside<void>> helpers;
+    const auto threads =
+        std::min<std::size_t>(static_cast<std::size_t>(usable_cpus()), paths.size());
+    for (std::size_t t = 1; t < threads; ++t) {
+        helpers.push_back(beside(work));
     }
-    return scans;
+    work();
+    for (auto& helper : helpers) {
+        helper.get();
+    }
+    double total = 0;
+    for (std::size_t k = 0; k < paths.size(); ++k) {
+        if (errors[k]) {
+            std::rethrow_exception(errors[k]);
+        }
+        const DemInfo& info = out.files[k].info;
+        if (!info.has_geotransform || info.crs_name.empty()) {
+            throw InputError(paths[k] + ": has no georeferencing; a mosaic of several DEMs needs "
+                                        "a CRS and geotransform in each");
+        }
+        total += static_cast<double>(info.width) * info.height;
+    }
+    out.use_scans = total <= kExactRangeSamples;
+    return out;
 }
 
 } // namespace
@@ -1107,10 +1147,10 @@ std::shared_ptr<const DemSource> DemSource::open(const std::vector<std::string>&
     if (paths.size() == 1) {
         return open_one(paths[0], nodata, range);
     }
-    const std::vector<FileScan> scans = scan_files(paths, nodata, range);
+    const Scans scans = scan_files(paths, nodata, range);
     std::vector<std::shared_ptr<const DemSource>> members;
-    for (const auto& group : group_by_grid(scans)) {
-        members.push_back(group_source(group, nodata, range));
+    for (const auto& group : group_by_grid(scans.files)) {
+        members.push_back(group_source(group, scans.use_scans, nodata, range));
     }
     if (members.size() == 1) {
         return members.front();

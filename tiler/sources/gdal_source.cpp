@@ -432,7 +432,7 @@ void check_height_band(const std::string& name, GDALDataset& ds) {
 } // namespace
 
 FileScan scan_file(const std::string& path,
-                   double max_samples,
+                   const std::function<bool(double samples)>& may_scan,
                    std::optional<double> nodata,
                    const ValidRange& range) {
     Described d = open_described(path, nodata, range);
@@ -450,7 +450,7 @@ FileScan scan_file(const std::string& path,
     if (const OGRSpatialReference* srs = d.ds->GetSpatialRef()) {
         scan.srs = std::make_shared<const OGRSpatialReference>(*srs);
     }
-    if (static_cast<double>(d.info.width) * d.info.height <= max_samples) {
+    if (may_scan(static_cast<double>(d.info.width) * d.info.height)) {
         scan.stats = scan_for_range(d.info, *band, INFINITY);
         take_stats(d.info, scan.stats);
         scan.scanned = true;

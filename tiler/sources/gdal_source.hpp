@@ -141,9 +141,10 @@ struct FileScan {
     bool scanned = false;
     BandStats stats;
 };
-// Scans the samples when the file holds at most `max_samples` of them.
+// Scans the samples when may_scan(the file's samples) says so (it is asked once). Thread-safe:
+// the files of a collection are scanned on several threads.
 FileScan scan_file(const std::string& path,
-                   double max_samples,
+                   const std::function<bool(double samples)>& may_scan,
                    std::optional<double> nodata,
                    const ValidRange& range);
 
