@@ -433,6 +433,51 @@ TEST_CASE("of several bad files, the error names the first given, however they a
     }
 }
 
+TEST_CASE("a sample equal to a mosaic's nodata is a void in it, whatever its file declares") {
+    ScratchDir dir;
+    const auto cell = [&](const std::string& name, int index, double value) {
+        Fixture f;
+        f.width = f.height = 40;
+        f.type = GDT_Int16;
+        f.epsg = 4326;
+        f.geotransform =
+            std::array<double, 6>{7.6 + index * 40.0 / 1200, 1.0 / 1200, 0, 46.4, 0, -1.0 / 1200};
+        f.values.assign(1600, value);
+        return std::make_pair(name, f);
+    };
+    auto [a_name, a] = cell("a.tif", 0, 100);
+    a.nodata = -9999; // the mosaic's nodata: the first file's
+    auto [b_name, b] = cell("b.tif", 1, 200);
+    b.nodata = -32768;
+    for (int k = 0; k < 400; ++k) {
+        b.values[k] = -9999; // a quarter of b: voids in the mosaic, not heights
+    }
+    auto [c_name, c] = cell("c.tif", 1, 2000);
+    c.scale = 0.1; // another scale: the mosaic holds c's heights, so -32768 raw is -3276.8 m
+    for (int k = 0; k < 5; ++k) {
+        c.values[k] = -32768;
+    }
+    const std::string pa = tb_test::write_fixture(dir.file(a_name), a);
+    const std::string pb = tb_test::write_fixture(dir.file(b_name), b);
+    const std::string pc = tb_test::write_fixture(dir.file(c_name), c);
+
+    const auto ab = tb::tiler::DemSource::open({pa, pb}); // no undeclared voids to refuse
+    CHECK(ab->info().min_height == 100);
+    CHECK(ab->info().max_height == 200);
+    CHECK(ab->info().nodata == -9999);
+    const double step = 180.0 / std::exp2(12) / 256;
+    const auto column = static_cast<std::int64_t>(std::llround((7.6 + 60.5 / 1200 + 180) / step));
+    const auto row = [&](double pixel_row) {
+        return static_cast<std::int64_t>(std::llround((90 - (46.4 - pixel_row / 1200)) / step));
+    };
+    CHECK(ab->sample(tb::tiler::Scheme::Geodetic, 12, 256, column, row(2.5), 1, 1).valid[0] == 0);
+    CHECK(ab->sample(tb::tiler::Scheme::Geodetic, 12, 256, column, row(30.5), 1, 1).valid[0] == 1);
+
+    const auto ac = tb::tiler::DemSource::open({pa, pc});
+    CHECK(ac->info().min_height == doctest::Approx(-3276.8));
+    CHECK(ac->info().max_height == doctest::Approx(200));
+}
+
 TEST_CASE("a sea at 0 m beside land, or a plateau, is not taken for undeclared voids") {
     ScratchDir dir;
     Fixture f = hills(129);

@@ -20,6 +20,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <condition_variable>
 #include <cstdio>
 #include <cstring>
 #include <exception>
@@ -965,20 +966,22 @@ double mosaic_nodata(const std::vector<const FileScan*>& files, std::optional<do
     return NAN;
 }
 
-// The mosaic's description from its files' scans. A file without a nodata value of its own
-// shows the mosaic's nodata value as a void too, so it is scanned again with that value.
+// The mosaic's description from its files' scans. A sample equal to the mosaic's nodata value
+// is a void in the mosaic whatever its file declares, so a file whose nodata is another (or
+// none) is scanned again, leaving those out as well as its own.
 DemInfo describe_from_scans(const std::string& vrt,
                             const std::vector<const FileScan*>& files,
                             double fill,
                             std::optional<double> nodata,
                             const ValidRange& range) {
+    const MosaicFill mosaic_fill{fill, !shares_scale(files)};
     std::vector<FileScan> again;
     again.reserve(files.size());
     std::vector<const FileScan*> scans;
     for (const FileScan* f : files) {
-        if (!f->info.nodata && std::isfinite(fill)) {
-            again.push_back(scan_file(
-                f->info.path, [](double) { return true; }, fill, range));
+        if (std::isfinite(fill) && f->info.nodata != fill) {
+            const auto always = [](const DemInfo&) { return true; };
+            again.push_back(scan_file(f->info.path, always, nodata, range, mosaic_fill));
             scans.push_back(&again.back());
         } else {
             scans.push_back(f);
@@ -988,16 +991,16 @@ DemInfo describe_from_scans(const std::string& vrt,
 }
 
 // One in-memory VRT mosaic of files that share a CRS and a pixel size; the first given wins
-// where they overlap. Its heights' range comes from the files' scans with `use_scans` (every
-// file was scanned), else from reading the mosaic (exact up to kExactRangeSamples).
+// where they overlap. Its heights' range comes from the files' scans when every file was
+// scanned, else from reading the mosaic (exact up to kExactRangeSamples).
 std::shared_ptr<const DemSource> open_mosaic(const std::vector<const FileScan*>& files,
-                                             bool use_scans,
                                              std::optional<double> nodata,
                                              const ValidRange& range) {
     std::vector<std::string> paths;
+    bool use_scans = true;
     for (const FileScan* f : files) {
         paths.push_back(f->info.path);
-        TB_ASSERT(f->scanned || !use_scans);
+        use_scans = use_scans && f->scanned;
     }
     const double fill = mosaic_nodata(files, nodata);
     char fill_text[32];
@@ -1015,11 +1018,10 @@ std::shared_ptr<const DemSource> open_mosaic(const std::vector<const FileScan*>&
 // One group of group_by_grid, its files' heights read once: a file alone (the same from its
 // scan or read again), or their mosaic.
 std::shared_ptr<const DemSource> group_source(const std::vector<const FileScan*>& files,
-                                              bool use_scans,
                                               std::optional<double> nodata,
                                               const ValidRange& range) {
     if (files.size() > 1) {
-        return open_mosaic(files, use_scans, nodata, range);
+        return open_mosaic(files, nodata, range);
     }
     const FileScan& f = *files.front();
     DemInfo info = f.scanned ? f.info : inspect_dem(f.info.path, kExactRangeSamples, nodata, range);
@@ -1062,8 +1064,10 @@ std::vector<std::vector<const FileScan*>> group_by_grid(const std::vector<FileSc
 // One file, opened once when its samples are few enough to read for the exact range.
 std::shared_ptr<const DemSource>
 open_one(const std::string& path, std::optional<double> nodata, const ValidRange& range) {
-    FileScan scan = scan_file(
-        path, [](double samples) { return samples <= kExactRangeSamples; }, nodata, range);
+    const auto few_enough = [](const DemInfo& info) {
+        return static_cast<double>(info.width) * info.height <= kExactRangeSamples;
+    };
+    FileScan scan = scan_file(path, few_enough, nodata, range);
     DemInfo info =
         scan.scanned ? std::move(scan.info) : inspect_dem(path, kExactRangeSamples, nodata, range);
     info.files = {path};
@@ -1072,35 +1076,71 @@ open_one(const std::string& path, std::optional<double> nodata, const ValidRange
     return std::make_shared<GdalDemSource>(path, std::move(info));
 }
 
-// Every file opened once, on each usable CPU: described, checked, and its samples read for the
-// exact range while the samples read so far stay within kExactRangeSamples. Whether a mosaic's
-// range comes from its files' scans is decided from all the files' samples (`use_scans`), never
-// from which were read first, so the layer is the same from run to run; so is the error thrown
-// (the first file's in the order given).
-struct Scans {
-    std::vector<FileScan> files;
-    bool use_scans = true;
+// Which files' samples are read while a collection opens: file k's when the files 0..k, in the
+// order given, hold at most kExactRangeSamples samples, as if they were opened one after another,
+// whichever thread opens which. A thread asking for file k waits until the files before it are
+// open (a file that failed counts as none), so the answer never depends on timing.
+class ScanBudget {
+public:
+    explicit ScanBudget(std::size_t files) : samples_(files, -1.0) {}
+
+    bool admit(std::size_t k, double samples) {
+        std::unique_lock lock(mutex_);
+        publish(k, samples);
+        known_.wait(lock, [&] { return prefix_.size() > k; });
+        return prefix_[k] <= kExactRangeSamples;
+    }
+    void failed(std::size_t k) {
+        std::lock_guard lock(mutex_);
+        publish(k, 0);
+    }
+
+private:
+    void publish(std::size_t k, double samples) {
+        if (samples_[k] >= 0) {
+            return;
+        }
+        samples_[k] = samples;
+        while (prefix_.size() < samples_.size() && samples_[prefix_.size()] >= 0) {
+            prefix_.push_back((prefix_.empty() ? 0 : prefix_.back()) + samples_[prefix_.size()]);
+        }
+        known_.notify_all();
+    }
+
+    std::mutex mutex_;
+    std::condition_variable known_;
+    std::vector<double> samples_; // per file, -1 until it is open
+    std::vector<double> prefix_;  // samples of files 0..k, for the files known so far
 };
 
-Scans scan_files(const std::vector<std::string>& paths,
-                 std::optional<double> nodata,
-                 const ValidRange& range) {
+// Every file opened once, on each usable CPU: described, checked (a mosaic needs georeferencing),
+// and its samples read while ScanBudget admits them. The error thrown is the first file's in
+// the order given.
+std::vector<FileScan> scan_files(const std::vector<std::string>& paths,
+                                 std::optional<double> nodata,
+                                 const ValidRange& range) {
     if (paths.size() >= 1000) {
         log::info("reading " + std::to_string(paths.size()) + " DEM files for their footprints " +
                   "and height ranges");
     }
-    Scans out;
-    out.files.resize(paths.size());
+    std::vector<FileScan> scans(paths.size());
     std::vector<std::exception_ptr> errors(paths.size());
+    ScanBudget budget(paths.size());
     std::atomic<std::size_t> next{0};
-    std::atomic<double> budget{kExactRangeSamples};
-    const auto may_scan = [&](double samples) { return budget.fetch_sub(samples) >= samples; };
     const auto work = [&] {
         for (std::size_t k; (k = next++) < paths.size();) {
+            const auto may_scan = [&](const DemInfo& info) {
+                if (!info.has_geotransform || info.crs_name.empty()) {
+                    throw InputError(info.path + ": has no georeferencing; a mosaic of several "
+                                                 "DEMs needs a CRS and geotransform in each");
+                }
+                return budget.admit(k, static_cast<double>(info.width) * info.height);
+            };
             try {
-                out.files[k] = scan_file(paths[k], may_scan, nodata, range);
+                scans[k] = scan_file(paths[k], may_scan, nodata, range);
             } catch (...) {
                 errors[k] = std::current_exception();
+                budget.failed(k);
             }
         }
     };
@@ -1114,20 +1154,12 @@ Scans scan_files(const std::vector<std::string>& paths,
     for (auto& helper : helpers) {
         helper.get();
     }
-    double total = 0;
-    for (std::size_t k = 0; k < paths.size(); ++k) {
-        if (errors[k]) {
-            std::rethrow_exception(errors[k]);
+    for (const auto& error : errors) {
+        if (error) {
+            std::rethrow_exception(error);
         }
-        const DemInfo& info = out.files[k].info;
-        if (!info.has_geotransform || info.crs_name.empty()) {
-            throw InputError(paths[k] + ": has no georeferencing; a mosaic of several DEMs needs "
-                                        "a CRS and geotransform in each");
-        }
-        total += static_cast<double>(info.width) * info.height;
     }
-    out.use_scans = total <= kExactRangeSamples;
-    return out;
+    return scans;
 }
 
 } // namespace
@@ -1147,10 +1179,10 @@ std::shared_ptr<const DemSource> DemSource::open(const std::vector<std::string>&
     if (paths.size() == 1) {
         return open_one(paths[0], nodata, range);
     }
-    const Scans scans = scan_files(paths, nodata, range);
+    const std::vector<FileScan> scans = scan_files(paths, nodata, range);
     std::vector<std::shared_ptr<const DemSource>> members;
-    for (const auto& group : group_by_grid(scans.files)) {
-        members.push_back(group_source(group, scans.use_scans, nodata, range));
+    for (const auto& group : group_by_grid(scans)) {
+        members.push_back(group_source(group, nodata, range));
     }
     if (members.size() == 1) {
         return members.front();

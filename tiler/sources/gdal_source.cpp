@@ -70,10 +70,19 @@ void add_sample(SampleStats& s, double h) {
     }
 }
 
+// Whether a sample (raw, and its height) is what its mosaic reads as void.
+bool is_fill(double raw, double height, const MosaicFill& fill, bool float32) {
+    return fill.heights ? height == fill.value
+                        : std::isnan(sample_height(raw, fill.value, float32, 1.0, 0.0));
+}
+
 // Reads band 1 (or, with `approx`, GDAL's sample overview of it, decimated to at most 16
 // Mpixel) strip by strip through to_height. A failed read is an IoError with GDAL's message:
 // truncated data, a missing VRT source, a file larger on paper than on disk.
-BandStats scan_band(const DemInfo& info, GDALRasterBand& band, bool approx) {
+BandStats scan_band(const DemInfo& info,
+                    GDALRasterBand& band,
+                    bool approx,
+                    const std::optional<MosaicFill>& fill = std::nullopt) {
     constexpr double kApproxSamples = 4096.0 * 4096;
     GDALRasterBand* src = &band;
     if (approx) {
@@ -117,7 +126,7 @@ BandStats scan_band(const DemInfo& info, GDALRasterBand& band, bool approx) {
         for (std::size_t k = 0; k < static_cast<std::size_t>(out_w) * n; ++k) {
             const double h =
                 sample_height(buffer[k], info.nodata, float32, info.scale, info.offset);
-            if (std::isnan(h)) {
+            if (std::isnan(h) || (fill && is_fill(buffer[k], h, *fill, float32))) {
                 continue;
             }
             add_sample(stats.all, h);
@@ -365,7 +374,10 @@ void take_stats(DemInfo& info, const BandStats& stats) {
 // Exact min/max over valid samples (metadata statistics are not trusted: some files carry
 // stale ones). Tileset bounding volumes are built from it, so an approximate range is only
 // taken where reading everything would hold up every start for long.
-BandStats scan_for_range(DemInfo& info, GDALRasterBand& band, double exact_range_samples) {
+BandStats scan_for_range(DemInfo& info,
+                         GDALRasterBand& band,
+                         double exact_range_samples,
+                         const std::optional<MosaicFill>& fill = std::nullopt) {
     const double samples = static_cast<double>(info.width) * info.height;
     const bool approx = samples > exact_range_samples;
     info.range_exact = !approx;
@@ -375,7 +387,7 @@ BandStats scan_for_range(DemInfo& info, GDALRasterBand& band, double exact_range
                   std::to_string(std::llround(samples / 1e6)) +
                   " Mpixel once for the exact height range");
     }
-    return scan_band(info, band, approx);
+    return scan_band(info, band, approx, fill);
 }
 
 // One end of two scans' statistics merged: `beyond` is < for the minimum, > for the maximum.
@@ -432,9 +444,10 @@ void check_height_band(const std::string& name, GDALDataset& ds) {
 } // namespace
 
 FileScan scan_file(const std::string& path,
-                   const std::function<bool(double samples)>& may_scan,
+                   const std::function<bool(const DemInfo&)>& may_scan,
                    std::optional<double> nodata,
-                   const ValidRange& range) {
+                   const ValidRange& range,
+                   std::optional<MosaicFill> fill) {
     Described d = open_described(path, nodata, range);
     check_height_band(path, *d.ds);
     FileScan scan;
@@ -450,8 +463,8 @@ FileScan scan_file(const std::string& path,
     if (const OGRSpatialReference* srs = d.ds->GetSpatialRef()) {
         scan.srs = std::make_shared<const OGRSpatialReference>(*srs);
     }
-    if (may_scan(static_cast<double>(d.info.width) * d.info.height)) {
-        scan.stats = scan_for_range(d.info, *band, INFINITY);
+    if (may_scan(d.info)) {
+        scan.stats = scan_for_range(d.info, *band, INFINITY, fill);
         take_stats(d.info, scan.stats);
         scan.scanned = true;
     }

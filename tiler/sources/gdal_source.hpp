@@ -60,7 +60,9 @@ struct DemInfo {
     double others_min = 0, others_max = 0;
     // Samples outside kLowestHeight..kHighestHeight (counted as nodata), and the first one
     // found (row by row): its pixel and height. Counted over every sample when range_exact,
-    // else over GDAL's approximate pass (a lower bound).
+    // else over GDAL's approximate pass (a lower bound). A mosaic described from its files'
+    // scans counts the pixels under another file too, and its first is the first file's that
+    // has one (in the order given), as a pixel of the mosaic.
     ValidRange valid_range; // heights outside it are outliers
     std::int64_t outliers = 0;
     std::int64_t outlier_column = 0, outlier_row = 0;
@@ -141,12 +143,20 @@ struct FileScan {
     bool scanned = false;
     BandStats stats;
 };
-// Scans the samples when may_scan(the file's samples) says so (it is asked once). Thread-safe:
-// the files of a collection are scanned on several threads.
+// The value a mosaic reads as void (its nodata), compared with a file's raw samples, or with its
+// heights where the mosaic applies the file's scale and offset itself.
+struct MosaicFill {
+    double value = 0;
+    bool heights = false;
+};
+// Scans the samples when may_scan(the file's description) says so (asked once; it may throw to
+// refuse the file). With `fill`, samples the mosaic reads as void are left out as nodata is.
+// Thread-safe: the files of a collection are scanned on several threads.
 FileScan scan_file(const std::string& path,
-                   const std::function<bool(double samples)>& may_scan,
+                   const std::function<bool(const DemInfo&)>& may_scan,
                    std::optional<double> nodata,
-                   const ValidRange& range);
+                   const ValidRange& range,
+                   std::optional<MosaicFill> fill = std::nullopt);
 
 // A mosaic described from the files it draws (every one scanned): its size, CRS and
 // georeferencing from `vrt` (its VRT, no sample read), its height range, outliers and undeclared

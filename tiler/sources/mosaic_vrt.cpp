@@ -118,7 +118,7 @@ std::string mosaic_vrt_xml(const std::vector<const FileScan*>& files, const std:
     Frame m{INFINITY, -INFINITY, pixel_size(files, 1), pixel_size(files, 5)};
     double east = -INFINITY, south = INFINITY;
     GDALDataType type = GDT_Unknown;
-    bool same_scale = true;
+    const bool same_scale = shares_scale(files);
     for (const FileScan* f : files) {
         const auto& g = f->info.geotransform;
         if (!(g[1] > 0) || !(g[5] < 0)) {
@@ -130,8 +130,6 @@ std::string mosaic_vrt_xml(const std::vector<const FileScan*>& files, const std:
         south = std::min(south, g[3] + f->info.height * g[5]);
         const GDALDataType t = GDALGetDataTypeByName(f->info.data_type.c_str());
         type = type == GDT_Unknown ? t : GDALDataTypeUnion(type, t);
-        same_scale = same_scale && f->info.scale == files.front()->info.scale &&
-                     f->info.offset == files.front()->info.offset;
     }
     std::unique_ptr<CPLXMLNode, XmlDeleter> root(
         CPLCreateXMLNode(nullptr, CXT_Element, "VRTDataset"));
@@ -173,6 +171,13 @@ std::string mosaic_vrt_xml(const std::vector<const FileScan*>& files, const std:
     std::string out = text ? text : "";
     CPLFree(text);
     return out;
+}
+
+bool shares_scale(const std::vector<const FileScan*>& files) {
+    return std::all_of(files.begin(), files.end(), [&](const FileScan* f) {
+        return f->info.scale == files.front()->info.scale &&
+               f->info.offset == files.front()->info.offset;
+    });
 }
 
 } // namespace tb::tiler

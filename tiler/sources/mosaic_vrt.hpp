@@ -16,4 +16,8 @@ namespace tb::tiler {
 // files are opened only when a read needs them.
 std::string mosaic_vrt_xml(const std::vector<const FileScan*>& files, const std::string& nodata);
 
+// Whether the files share one scale and offset, which the mosaic's band then carries. Otherwise
+// the mosaic applies each file's own and holds heights (Float64).
+bool shares_scale(const std::vector<const FileScan*>& files);
+
 } // namespace tb::tiler
