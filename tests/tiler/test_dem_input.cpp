@@ -62,6 +62,18 @@ Fixture hills(int n, GDALDataType type = GDT_Float32) {
     return f;
 }
 
+// Cell `index` (west to east) of a row of 40 x 40 cells of one 3" grid, every sample `value`.
+Fixture mosaic_cell(int index, GDALDataType type, double value) {
+    Fixture f;
+    f.width = f.height = 40;
+    f.type = type;
+    f.epsg = 4326;
+    f.geotransform =
+        std::array<double, 6>{7.6 + index * 40.0 / 1200, 1.0 / 1200, 0, 46.4, 0, -1.0 / 1200};
+    f.values.assign(1600, value);
+    return f;
+}
+
 // Every number in a JSON document is finite (nlohmann parses only valid JSON, which has no
 // inf or nan).
 void check_json_numbers(const nlohmann::json& j) {
@@ -435,31 +447,21 @@ TEST_CASE("of several bad files, the error names the first given, however they a
 
 TEST_CASE("a sample equal to a mosaic's nodata is a void in it, whatever its file declares") {
     ScratchDir dir;
-    const auto cell = [&](const std::string& name, int index, double value) {
-        Fixture f;
-        f.width = f.height = 40;
-        f.type = GDT_Int16;
-        f.epsg = 4326;
-        f.geotransform =
-            std::array<double, 6>{7.6 + index * 40.0 / 1200, 1.0 / 1200, 0, 46.4, 0, -1.0 / 1200};
-        f.values.assign(1600, value);
-        return std::make_pair(name, f);
-    };
-    auto [a_name, a] = cell("a.tif", 0, 100);
+    Fixture a = mosaic_cell(0, GDT_Int16, 100);
     a.nodata = -9999; // the mosaic's nodata: the first file's
-    auto [b_name, b] = cell("b.tif", 1, 200);
+    Fixture b = mosaic_cell(1, GDT_Int16, 200);
     b.nodata = -32768;
     for (int k = 0; k < 400; ++k) {
         b.values[k] = -9999; // a quarter of b: voids in the mosaic, not heights
     }
-    auto [c_name, c] = cell("c.tif", 1, 2000);
+    Fixture c = mosaic_cell(1, GDT_Int16, 2000);
     c.scale = 0.1; // another scale: the mosaic holds c's heights, so -32768 raw is -3276.8 m
     for (int k = 0; k < 5; ++k) {
         c.values[k] = -32768;
     }
-    const std::string pa = tb_test::write_fixture(dir.file(a_name), a);
-    const std::string pb = tb_test::write_fixture(dir.file(b_name), b);
-    const std::string pc = tb_test::write_fixture(dir.file(c_name), c);
+    const std::string pa = tb_test::write_fixture(dir.file("a.tif"), a);
+    const std::string pb = tb_test::write_fixture(dir.file("b.tif"), b);
+    const std::string pc = tb_test::write_fixture(dir.file("c.tif"), c);
 
     const auto ab = tb::tiler::DemSource::open({pa, pb}); // no undeclared voids to refuse
     CHECK(ab->info().min_height == 100);
@@ -512,26 +514,16 @@ TEST_CASE("a mosaic of files of mixed types, scales and nodata reads each as it 
     // Three 40 x 40 cells of one 3" grid, west to east: Int16 declaring -32768 as nodata, Float32
     // declaring none (its -32768 samples are voids through the mosaic's nodata, which the first
     // file gives), and Int16 heights stored as raw * 0.5 + 10, one raw 20000 (10,010 m) among them.
-    const auto cell = [&](int index, GDALDataType type, double value) {
-        Fixture f;
-        f.width = f.height = 40;
-        f.type = type;
-        f.epsg = 4326;
-        f.geotransform =
-            std::array<double, 6>{7.6 + index * 40.0 / 1200, 1.0 / 1200, 0, 46.4, 0, -1.0 / 1200};
-        f.values.assign(1600, value);
-        return f;
-    };
-    Fixture a = cell(0, GDT_Int16, 100);
+    Fixture a = mosaic_cell(0, GDT_Int16, 100);
     a.nodata = -32768;
     a.values[3 * 40 + 3] = 150;
     a.values[4 * 40 + 3] = -32768;
-    Fixture b = cell(1, GDT_Float32, 200);
+    Fixture b = mosaic_cell(1, GDT_Float32, 200);
     b.values[10 * 40 + 10] = 40;
     for (int k = 0; k < 40; ++k) {
         b.values[20 * 40 + k] = -32768;
     }
-    Fixture c = cell(2, GDT_Int16, 400);
+    Fixture c = mosaic_cell(2, GDT_Int16, 400);
     c.scale = 0.5, c.offset = 10;
     c.values[7 * 40 + 5] = 20000;
     const std::vector<std::string> paths{tb_test::write_fixture(dir.file("a.tif"), a),
