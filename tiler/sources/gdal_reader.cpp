@@ -1003,9 +1003,7 @@ std::shared_ptr<const DemSource> open_mosaic(const std::vector<const FileScan*>&
         use_scans = use_scans && f->scanned;
     }
     const double fill = mosaic_nodata(files, nodata);
-    char fill_text[32];
-    std::snprintf(fill_text, sizeof fill_text, std::isnan(fill) ? "nan" : "%.17g", fill);
-    auto file = std::make_shared<const MemoryFile>(mosaic_vrt_xml(files, fill_text));
+    auto file = std::make_shared<const MemoryFile>(mosaic_vrt_xml(files, fill));
     DemInfo info = use_scans ? describe_from_scans(file->path(), files, fill, nodata, range)
                              : inspect_dem(file->path(), kExactRangeSamples, nodata, range);
     info.path = inputs_text(paths);

@@ -20,7 +20,11 @@ struct XmlDeleter {
     void operator()(CPLXMLNode* node) const { CPLDestroyXMLNode(node); }
 };
 
+// A number as GDAL reads it back exactly; NaN as "nan".
 std::string number(double v) {
+    if (std::isnan(v)) {
+        return "nan";
+    }
     char text[40];
     std::snprintf(text, sizeof text, "%.17g", v);
     return text;
@@ -113,7 +117,7 @@ void add_overview_list(CPLXMLNode* root, const std::vector<const FileScan*>& fil
 
 } // namespace
 
-std::string mosaic_vrt_xml(const std::vector<const FileScan*>& files, const std::string& nodata) {
+std::string mosaic_vrt_xml(const std::vector<const FileScan*>& files, double nodata) {
     TB_ASSERT(!files.empty());
     Frame m{INFINITY, -INFINITY, pixel_size(files, 1), pixel_size(files, 5)};
     double east = -INFINITY, south = INFINITY;
@@ -156,7 +160,7 @@ std::string mosaic_vrt_xml(const std::vector<const FileScan*>& files, const std:
     CPLAddXMLAttributeAndValue(
         band, "dataType", GDALGetDataTypeName(same_scale ? type : GDT_Float64));
     CPLAddXMLAttributeAndValue(band, "band", "1");
-    CPLCreateXMLElementAndValue(band, "NoDataValue", nodata.c_str());
+    CPLCreateXMLElementAndValue(band, "NoDataValue", number(nodata).c_str());
     const DemInfo& first = files.front()->info;
     if (same_scale && (first.scale != 1.0 || first.offset != 0.0)) {
         CPLCreateXMLElementAndValue(band, "Offset", number(first.offset).c_str());
