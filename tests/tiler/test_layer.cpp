@@ -356,7 +356,7 @@ TEST_CASE("encoded tiles decode, and many threads get the same bytes as one") {
     CHECK(drc.indices.size() == decoded.indices.size());
 }
 
-TEST_CASE("a max_zoom below the native zoom scales the default eps to that zoom's spacing") {
+TEST_CASE("a max_zoom below the native zoom keeps the lattice's eps ladder at that zoom") {
     const auto path = tb_test::shared_dem("N44W072.hgt");
     if (!path) {
         return;
@@ -366,9 +366,10 @@ TEST_CASE("a max_zoom below the native zoom scales the default eps to that zoom'
     options.max_zoom = 8;
     const auto layer = Layer::open(options);
     const auto native = open_layer({*path});
-    // z8 samples are about 3.3 pixels apart: eps about 3.3 x 1.74 m, near the native ladder's
-    // 4 x 1.74 m at z8, never the native finest eps (whose lattice z8 tiles cannot hold).
-    CHECK(layer->eps_for_zoom(8) == doctest::Approx(3.3 * native->eps_for_zoom(10)).epsilon(0.1));
+    // The default ladder follows the lattice (eps(z) = e0 / 2^z), whatever the deepest zoom: the
+    // native ladder's 4 x 1.68 m at z8, never the native finest eps (whose lattice z8 tiles
+    // cannot hold).
+    CHECK(layer->eps_for_zoom(8) == 4 * native->eps_for_zoom(10));
     const TileRange r = layer->tiles_at(8);
     const std::string glb = layer->make_tile(layer->tile({8, r.x0, r.y0}), Format::Glb, {});
     CHECK(glb.size() > 1000);

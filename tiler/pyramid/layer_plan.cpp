@@ -18,13 +18,29 @@
 namespace tb::tiler {
 namespace {
 
-// Default eps at max_zoom: its sample spacing (at least the resolution) / 45, i.e. 2 m for
-// SRTM3 (~90 m) at the native zoom, scaling with the sample spacing like every level of the
-// ladder. 2 m is a third of SRTM's relative vertical
-// accuracy (about 6 m, 90% linear error) and four times its 1 m integer quantization, so the
-// mesh error stays well below the data's own noise while the meshes stay small; it is also
-// far below CesiumJS's level geometric error (77067 m / 2^z, about 75 m at SRTM3's z = 10).
-constexpr double kResolutionPerEps = 45.0;
+// The default eps ladder follows the lattice, not the data: eps(z) = e0 / 2^z, e0 the ground
+// size of a zoom-0 lattice step at the data's middle latitude (the geometric mean of its sides
+// east and north, as a DEM's resolution_m measures a pixel) over kStepPerEps, on a step of
+// on_step. So a DEM finer than all before (a survey over SRTM) deepens the pyramid without
+// moving any zoom's eps, and build --update remakes only the tiles over it.
+// kStepPerEps = 45 * 2^18 / (180 * 1200): the lattice step at SRTM 3"'s own zoom is 216000/262144
+// of its pixel, so DEMs of 3"/2^k keep the eps they had when it was their resolution / 45: 2 m
+// for SRTM 3" (~90 m) at its zoom. That is a third of SRTM's relative vertical accuracy (about
+// 6 m, 90% linear error) and four times its 1 m integer quantization, so the mesh error stays
+// well below the data's own noise while the meshes stay small; it is also far below CesiumJS's
+// level geometric error (77067 m / 2^z, about 75 m at SRTM 3"'s z = 10). Other resolutions get
+// 0.61-1.21 times their resolution / 45 at their finest zoom (SRTM 1": 0.75), whose lattice step
+// lies between half a pixel and a pixel.
+constexpr double kStepPerEps = 45.0 * 216000.0 / 262144.0;
+
+// Ground metres of one lattice step of zoom z at latitude `lat` (degrees), the geometric mean
+// of its east and north sides.
+double lattice_step_m(Scheme scheme, int z, int size, double lat) {
+    constexpr double kPi = 3.14159265358979323846;
+    const double step = lattice_x(scheme, z, size, 1) - lattice_x(scheme, z, size, 0);
+    const double c = std::cos(lat * kPi / 180);
+    return scheme == Scheme::Geodetic ? step * 6378137.0 * kPi / 180 * std::sqrt(c) : step * c;
+}
 
 // Data-driven eps (the default finest eps, a zoom's reach share) is rounded to the nearest step
 // of 2^(1/kStepsPerOctave), within 4.4 % of the statistic either way: the statistics behind it
@@ -90,15 +106,14 @@ LayerPlan::LayerPlan(const LayerOptions& options, const DemSource& source)
         members_.emplace(options_, source_, datum_);
     }
     plan_zooms();
-    // The default scales with the sample spacing at max_zoom, which is coarser than the
-    // source's pixels when max_zoom is set below the native zoom.
-    const double pixels =
-        std::max(1.0, source_.pixels_per_sample(options_.scheme, max_zoom_, options_.tile_size));
+    // The lattice's ladder (kStepPerEps) at max_zoom, unless the data's height step (or
+    // kMinEps) is larger there: then the ladder doubles up from that.
+    const double lat = 0.5 * (footprint_.south + footprint_.north);
+    const double zero_eps =
+        on_step(lattice_step_m(options_.scheme, 0, options_.tile_size, lat) / kStepPerEps);
     finest_eps_ = options_.finest_eps
                       ? *options_.finest_eps
-                      : std::max({kMinEps,
-                                  on_step(info.resolution_m * pixels / kResolutionPerEps),
-                                  height_step(info)});
+                      : std::max({kMinEps, std::ldexp(zero_eps, -max_zoom_), height_step(info)});
     compute_height_range();
 }
 
