@@ -96,7 +96,8 @@ TEST_CASE("the metadata of the two root tiles lists, level by level, what layer.
     REQUIRE(doc);
     const auto available = nlohmann::json::parse(doc->body)["available"];
     // Tiles per level, from the roots' metadata extension (child availability).
-    std::vector<std::set<std::pair<std::int64_t, std::int64_t>>> listed(available.size());
+    std::vector<std::set<std::pair<std::int64_t, std::int64_t>>> listed(
+        std::max<std::size_t>(available.size(), tiler::kMetadataLevels + 1));
     for (const std::int64_t x : {0, 1}) {
         auto res = c.Get(terrain_url({0, x, 0}).c_str(),
                          {{"Accept", "application/vnd.quantized-mesh;extensions=metadata"}});
@@ -106,7 +107,12 @@ TEST_CASE("the metadata of the two root tiles lists, level by level, what layer.
         const auto meta = nlohmann::json::parse(t.extensions[0].data.substr(4));
         CHECK(meta["filler"] == true);
         const auto& levels = meta["available"];
-        CHECK(levels.size() == std::min<std::size_t>(tiler::kMetadataLevels, available.size() - 1));
+        // Always kMetadataLevels levels, those past the deepest zoom empty: a deeper pyramid
+        // then changes only the metadata of the tiles above its new ones.
+        REQUIRE(levels.size() == tiler::kMetadataLevels);
+        for (std::size_t k = available.size() - 1; k < levels.size(); ++k) {
+            CHECK(levels[k].empty());
+        }
         for (std::size_t k = 0; k < levels.size(); ++k) {
             for (const auto& r : levels[k]) {
                 for (std::int64_t y = r["startY"]; y <= r["endY"].get<std::int64_t>(); ++y) {

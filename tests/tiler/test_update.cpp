@@ -7,6 +7,7 @@
 #include "tiler/stores/manifest.hpp"
 
 #include <doctest/doctest.h>
+#include <nlohmann/json.hpp>
 #include <sqlite3.h>
 
 #include <atomic>
@@ -209,6 +210,28 @@ TEST_CASE("build --update after a DEM is added, replaced or removed equals a ful
     }
 }
 
+TEST_CASE("a DEM finer than all before moves no zoom's eps; the update adding it equals a full "
+          "build and makes fewer tiles") {
+    // The eps ladder follows the lattice (eps(z) = e0 / 2^z), so deepening the pyramid leaves
+    // every zoom's eps: a 0.8 degree cell with a finer block (a collection), then a block finer
+    // still in another corner of the cell (next year's survey).
+    ScratchDir dir;
+    const std::string a = write_dem(dir.file("a.tif"), 8.0, 47.0, 193, 193, 0.8 / 192, 0);
+    const std::string c = write_dem(dir.file("c.tif"), 8.2, 46.5, 97, 97, 0.1 / 96, 2);
+    const std::string f = write_dem(dir.file("f.tif"), 8.55, 46.9, 81, 81, 0.02 / 80, 6);
+    const std::string out = dir.file("out"), fresh = dir.file("fresh");
+    build(options({a, c}, out));
+    const auto eps_of = [&] {
+        const Manifest m = parse_manifest(slurp(out + "/terrain/" + kBuildManifest));
+        return nlohmann::json::parse(manifest_value(m, "eps")).get<std::vector<double>>();
+    };
+    const std::vector<double> before = eps_of();
+    check_same_as_full({a, c, f}, out, fresh, build(options({a, c, f}, out), true));
+    const std::vector<double> after = eps_of();
+    REQUIRE(after.size() == before.size() + 2); // f's two deeper zooms
+    CHECK(std::equal(before.begin(), before.end(), after.begin()));
+}
+
 TEST_CASE("an interrupted update is finished by running it again; --resume alone is refused "
           "while it is pending") {
     const TwoDems two;
@@ -294,7 +317,8 @@ TEST_CASE("an update remakes every tile when a grid's summary changes its finest
             value = "[4]";
         }
     }
-    CHECK(update_scope(was, now).everything == "summary_levels changed (was [3], now [4])");
+    CHECK(update_scope(was, now).everything ==
+          "a pixel grid's summary's finest level changed (was 3, now 4)");
 }
 
 TEST_CASE("--update refuses what it cannot update, naming the way out") {

@@ -1009,8 +1009,11 @@ std::string layer_json_with_extensions(std::string_view layer_json, unsigned mas
 }
 
 std::string terrain_metadata(const TerrainSpec& spec, const TileId& id, double error, bool filler) {
+    // Always kMetadataLevels levels (those past max_zoom or kMaxZoom empty), so that a pyramid
+    // made deeper changes the metadata only of the tiles above its new tiles: build --update
+    // remakes those as their ancestors, and no other.
     std::string out = "{\"available\":[";
-    for (int k = 1; k <= kMetadataLevels && id.z + k <= spec.max_zoom; ++k) {
+    for (int k = 1; k <= kMetadataLevels && id.z + k <= kMaxZoom; ++k) {
         const int z = id.z + k;
         TileRange r = terrain_available(spec, z);
         const std::int64_t scale = std::int64_t{1} << k;

@@ -180,7 +180,8 @@ std::string terrain_layer_json(const TerrainSpec& spec);
 std::string layer_json_with_extensions(std::string_view layer_json, unsigned mask);
 
 // The metadata extension's JSON of tile id: the available tiles under it for the next
-// kMetadataLevels zooms, and the error it publishes (null for filler).
+// kMetadataLevels zooms (up to kMaxZoom; those past max_zoom hold none), and the error it
+// publishes (null for filler).
 std::string terrain_metadata(const TerrainSpec& spec, const TileId& id, double error, bool filler);
 
 // A flat filler tile on the geoid (sea level): 16 x 16 cells over the rectangle.

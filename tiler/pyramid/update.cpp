@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <limits>
 #include <set>
+#include <tuple>
 
 namespace tb::tiler {
 namespace {
@@ -31,6 +32,8 @@ const std::set<std::string> kCompared = {"sources",
                                          "dem_max_zoom",
                                          "mesh_ranges",
                                          "dem_ranges",
+                                         "grid_origins",
+                                         "summary_levels",
                                          "shard_count"};
 
 json parse_entry(const Manifest& m, const std::string& key, const std::string& which) {
@@ -264,25 +267,35 @@ LonLatBox box_of(const Manifest& m, const std::string& key, const std::string& w
 }
 
 // A pixel grid as source_grids_entry records it: pixel size, then lon/lat extent.
+// A pixel grid as the manifest lists it: source_grids, grid_origins and summary_levels, one
+// entry per grid in the same order.
 struct Grid {
     double dx = 0, dy = 0;
     LonLatBox box;
+    json origin;        // its grid_origins entry
+    json summary_level; // its summary_levels entry
 };
 
 std::vector<Grid> grids_of(const Manifest& m, const std::string& which) {
     const json entry = parse_entry(m, "source_grids", which);
-    if (!entry.is_array()) {
+    const json origins = parse_entry(m, "grid_origins", which);
+    const json levels = parse_entry(m, "summary_levels", which);
+    if (!entry.is_array() || !origins.is_array() || !levels.is_array() ||
+        origins.size() != entry.size() || levels.size() != entry.size()) {
         throw unparsable(which, "source_grids");
     }
     std::vector<Grid> out;
-    for (const json& g : entry) {
+    for (std::size_t k = 0; k < entry.size(); ++k) {
+        const json& g = entry[k];
         if (!g.is_array() || g.size() != 6 || !all_numbers(g)) {
             throw unparsable(which, "source_grids");
         }
         out.push_back(
             {g[0].get<double>(),
              g[1].get<double>(),
-             {g[2].get<double>(), g[3].get<double>(), g[4].get<double>(), g[5].get<double>()}});
+             {g[2].get<double>(), g[3].get<double>(), g[4].get<double>(), g[5].get<double>()},
+             origins[k],
+             levels[k]});
     }
     return out;
 }
@@ -290,14 +303,23 @@ std::vector<Grid> grids_of(const Manifest& m, const std::string& which) {
 // A tile over the edge of a pixel grid meshes only the grid's pixels; inside a larger grid (a
 // mosaic grown by a DEM) the same place is a void, filled. So where a grid's extent grew or
 // shrank, the tiles change: the difference of its old and new extents joins the boxes. Grids
-// are matched by pixel size and overlap; one without a match joins whole.
+// are matched by pixel size and overlap; one without a match joins whole. Every tile changes
+// when a matched grid's origin or summary level moved (every read is placed from the origin,
+// and every block of the summary changes), or when one grid becomes several or several one
+// (a collection reads each zoom another way).
 void compare_grids(UpdateScope& scope, const Manifest& was, const Manifest& now) {
     std::vector<Grid> before = grids_of(was, "last");
+    const std::vector<Grid> after = grids_of(now, "new");
+    if ((before.size() == 1) != (after.size() == 1)) {
+        scope.everything = "the DEMs' " + std::to_string(before.size()) +
+                           " pixel grid(s) are now " + std::to_string(after.size());
+        return;
+    }
     std::vector<bool> matched(before.size(), false);
     const auto meets = [](const LonLatBox& a, const LonLatBox& b) {
         return a.west <= b.east && b.west <= a.east && a.south <= b.north && b.south <= a.north;
     };
-    for (const Grid& g : grids_of(now, "new")) {
+    for (const Grid& g : after) {
         std::size_t k = 0;
         while (k < before.size() && (matched[k] || before[k].dx != g.dx || before[k].dy != g.dy ||
                                      !meets(before[k].box, g.box))) {
@@ -308,6 +330,15 @@ void compare_grids(UpdateScope& scope, const Manifest& was, const Manifest& now)
             continue;
         }
         matched[k] = true;
+        for (const auto& [key, was_entry, now_entry] :
+             {std::tuple{"origin", &before[k].origin, &g.origin},
+              std::tuple{"summary's finest level", &before[k].summary_level, &g.summary_level}}) {
+            if (*was_entry != *now_entry) {
+                scope.everything = std::string("a pixel grid's ") + key + " changed (was " +
+                                   was_entry->dump() + ", now " + now_entry->dump() + ")";
+                return;
+            }
+        }
         add_difference(scope, before[k].box, g.box);
     }
     for (std::size_t k = 0; k < before.size(); ++k) {
