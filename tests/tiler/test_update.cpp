@@ -44,10 +44,18 @@ std::string write_dem(
     return write_fixture(path, f);
 }
 
+// The tests' 0.8 degree cell (a.tif), and a finer block inside it (c.tif).
+std::string cell_a(const ScratchDir& dir) {
+    return write_dem(dir.file("a.tif"), 8.0, 47.0, 193, 193, 0.8 / 192, 0);
+}
+std::string finer_block_c(const ScratchDir& dir) {
+    return write_dem(dir.file("c.tif"), 8.2, 46.5, 97, 97, 0.1 / 96, 2);
+}
+
 // Two overlapping DEMs of one grid in a scratch directory, and where their build goes.
 struct TwoDems {
     ScratchDir dir;
-    std::string a = write_dem(dir.file("a.tif"), 8.0, 47.0, 193, 193, 0.8 / 192, 0);
+    std::string a = cell_a(dir);
     std::string b = write_dem(dir.file("b.tif"), 8.6, 46.7, 97, 49, 0.8 / 192, 1);
     std::string out = dir.file("out");
 };
@@ -173,9 +181,9 @@ TEST_CASE("build --update after a DEM is added, replaced or removed equals a ful
     ScratchDir dir;
     // A 0.8 degree cell, a block on its grid at its east edge (a mosaic that grows), a finer
     // block inside it (a collection of two resolutions), and later one at its north-west corner.
-    const std::string a = write_dem(dir.file("a.tif"), 8.0, 47.0, 193, 193, 0.8 / 192, 0);
+    const std::string a = cell_a(dir);
     const std::string b = write_dem(dir.file("b.tif"), 8.6, 46.7, 97, 49, 0.8 / 192, 1);
-    const std::string c = write_dem(dir.file("c.tif"), 8.2, 46.5, 97, 97, 0.1 / 96, 2);
+    const std::string c = finer_block_c(dir);
     for (const std::string ext : {"", ".sqlite"}) {
         CAPTURE(ext);
         const std::string out = dir.file("out" + ext), fresh = dir.file("fresh" + ext);
@@ -216,8 +224,7 @@ TEST_CASE("a DEM finer than all before moves no zoom's eps; the update adding it
     // every zoom's eps: a 0.8 degree cell with a finer block (a collection), then a block finer
     // still in another corner of the cell (next year's survey).
     ScratchDir dir;
-    const std::string a = write_dem(dir.file("a.tif"), 8.0, 47.0, 193, 193, 0.8 / 192, 0);
-    const std::string c = write_dem(dir.file("c.tif"), 8.2, 46.5, 97, 97, 0.1 / 96, 2);
+    const std::string a = cell_a(dir), c = finer_block_c(dir);
     const std::string f = write_dem(dir.file("f.tif"), 8.55, 46.9, 81, 81, 0.02 / 80, 6);
     const std::string out = dir.file("out"), fresh = dir.file("fresh");
     build(options({a, c}, out));
@@ -306,7 +313,7 @@ TEST_CASE("an update remakes every tile when a grid's summary changes its finest
     // A grid past about 537 Mpixel reads its summary from a coarser finest level, whose every
     // block differs; no test can write such a grid, so the manifests are compared directly.
     ScratchDir dir;
-    const std::string a = write_dem(dir.file("a.tif"), 8.0, 47.0, 193, 193, 0.8 / 192, 0);
+    const std::string a = cell_a(dir);
     build(options({a}, dir.file("out")));
     const Manifest was = parse_manifest(slurp(dir.file("out/terrain/") + kBuildManifest));
     CHECK(manifest_value(was, "summary_levels") == "[3]");
@@ -323,7 +330,7 @@ TEST_CASE("an update remakes every tile when a grid's summary changes its finest
 
 TEST_CASE("--update refuses what it cannot update, naming the way out") {
     ScratchDir dir;
-    const std::string a = write_dem(dir.file("a.tif"), 8.0, 47.0, 193, 193, 0.8 / 192, 0);
+    const std::string a = cell_a(dir);
     CHECK_THROWS_WITH_AS(build(options({a}, dir.file("none")), true),
                          doctest::Contains("nothing to update"),
                          tb::InputError);
