@@ -130,7 +130,7 @@ public:
     double eps_for_zoom(int z) const override { return plan_.eps_for_zoom(z); }
     double terrain_eps_for_zoom(int z) const override { return plan_.terrain_eps_for_zoom(z); }
     LonLatBox data_bounds() const override { return plan_.footprint(); }
-    LonLatBox data_bounds_at(int z) const override { return plan_.footprint_at(z); }
+    std::vector<LonLatBox> data_bounds_at(int z) const override { return plan_.footprints_at(z); }
     TileRange tiles_at(int z) const override { return plan_.tiles_at(z); }
     bool may_have_tile(const ValidTile& tile) const override { return plan_.may_have_tile(tile); }
     ZoomSource zoom_source(int z) const override { return plan_.zoom_source(z); }

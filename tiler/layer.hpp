@@ -147,9 +147,9 @@ public:
     // share of CesiumJS's own level error where that is larger.
     virtual double terrain_eps_for_zoom(int z) const = 0;
     virtual LonLatBox data_bounds() const = 0; // the sources' extent in lon/lat
-    // Where zoom z has data: data_bounds(), or for a collection the part of it whose sources go
-    // that deep (DemSource::footprint_at).
-    virtual LonLatBox data_bounds_at(int z) const = 0;
+    // Where zoom z has data: data_bounds(), or for a collection the footprints of the sources
+    // that go that deep (DemSource::footprints_at).
+    virtual std::vector<LonLatBox> data_bounds_at(int z) const = 0;
     virtual TileRange tiles_at(int z) const = 0; // tiles of zoom z that may hold data
     // Whether a tile of the layer's scheme lies in tiles_at of its zoom.
     virtual bool may_have_tile(const ValidTile& tile) const = 0;

@@ -197,6 +197,27 @@ TileRange tiles_covering(Scheme scheme, const LonLatBox& box, int z) {
     return range;
 }
 
+bool in_any(const std::vector<TileRange>& ranges, std::int64_t x, std::int64_t y) {
+    return std::any_of(
+        ranges.begin(), ranges.end(), [&](const TileRange& r) { return r.contains(x, y); });
+}
+
+TileRange bounding(int z, const std::vector<TileRange>& ranges) {
+    TileRange out{z, 0, 0, -1, -1};
+    for (const TileRange& r : ranges) {
+        if (r.empty()) {
+            continue;
+        }
+        out = out.empty() ? r
+                          : TileRange{z,
+                                      std::min(out.x0, r.x0),
+                                      std::min(out.y0, r.y0),
+                                      std::max(out.x1, r.x1),
+                                      std::max(out.y1, r.y1)};
+    }
+    return out;
+}
+
 TileRange tiles_in_families(Scheme scheme, const LonLatBox& deep, const LonLatBox& all, int z) {
     TileRange r = tiles_covering(scheme, deep, z);
     if (r.empty() || z == 0) {

@@ -32,7 +32,15 @@ struct TileRange {
     std::int64_t x0 = 0, y0 = 0, x1 = -1, y1 = -1; // empty when x1 < x0
     bool empty() const { return x1 < x0 || y1 < y0; }
     std::int64_t count() const { return empty() ? 0 : (x1 - x0 + 1) * (y1 - y0 + 1); }
+    bool contains(std::int64_t x, std::int64_t y) const {
+        return x >= x0 && x <= x1 && y >= y0 && y <= y1;
+    }
 };
+
+// Whether tile (x, y) lies in one of the ranges.
+bool in_any(const std::vector<TileRange>& ranges, std::int64_t x, std::int64_t y);
+// The smallest range of zoom z holding every one of `ranges` (empty when they all are).
+TileRange bounding(int z, const std::vector<TileRange>& ranges);
 
 inline constexpr int kMaxZoom = 24;
 

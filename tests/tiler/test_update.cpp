@@ -21,18 +21,26 @@ using namespace tb_test;
 
 namespace {
 
-// A geographic Float32 DEM of w x h pixels of `step` degrees from (west, north): hills whose
-// shape `seed` varies, and a void in its south-west corner.
-std::string write_dem(
-    const std::string& path, double west, double north, int w, int h, double step, double seed) {
+// A geographic Float32 DEM of w x h pixels of `step` degrees (dx = step * aspect, dy = step /
+// aspect) from (west, north): hills whose shape `seed` varies, and a void in its south-west
+// corner.
+std::string write_dem(const std::string& path,
+                      double west,
+                      double north,
+                      int w,
+                      int h,
+                      double step,
+                      double seed,
+                      double aspect = 1) {
     Fixture f;
     f.width = w, f.height = h;
-    f.geotransform = std::array<double, 6>{west, step, 0, north, 0, -step};
+    const double dx = step * aspect, dy = step / aspect;
+    f.geotransform = std::array<double, 6>{west, dx, 0, north, 0, -dy};
     f.epsg = 4326;
     f.nodata = -9999;
     for (int r = 0; r < h; ++r) {
         for (int c = 0; c < w; ++c) {
-            const double x = west + c * step, y = north - r * step;
+            const double x = west + c * dx, y = north - r * dy;
             double v = 900 + 400 * std::sin(7 * x + seed) * std::cos(5 * y - seed) +
                        120 * std::sin(31 * x * y + 2 * seed);
             if (c < w / 8 && r > h - h / 8) {
@@ -237,6 +245,80 @@ TEST_CASE("a DEM finer than all before moves no zoom's eps; the update adding it
     const std::vector<double> after = eps_of();
     REQUIRE(after.size() == before.size() + 2); // f's two deeper zooms
     CHECK(std::equal(before.begin(), before.end(), after.begin()));
+}
+
+TEST_CASE("an update after which two grids swap rank (a file of one listed before the other's) "
+          "equals a full build") {
+    // Grids of pixels equally fine (the same area) rank by their first file given: w1's grid
+    // (pixels twice as wide as a's, half as tall) ranks below a's until w2, of w1's grid, is
+    // listed first. Then w1 wins over a where they overlap, outside w2's box.
+    ScratchDir dir;
+    const double step = 0.8 / 192;
+    const std::string a = cell_a(dir);
+    const std::string w1 = write_dem(dir.file("w1.tif"), 8.3, 46.8, 24, 96, step, 7, 2);
+    const std::string w2 = write_dem(dir.file("w2.tif"), 8.6, 46.4, 24, 96, step, 8, 2);
+    const std::string out = dir.file("out");
+    build(options({a, w1}, out));
+    check_same_as_full(
+        {w2, a, w1}, out, dir.file("fresh"), build(options({w2, a, w1}, out), true), false);
+}
+
+TEST_CASE("depth follows each DEM: the zooms only two far-apart blocks reach have tiles over "
+          "each block, none over the land between them") {
+    ScratchDir dir;
+    const std::string a = cell_a(dir), c = finer_block_c(dir);
+    const std::string f = write_dem(dir.file("f.tif"), 8.55, 46.9, 81, 81, 0.02 / 80, 6);
+    LayerOptions o;
+    o.sources = {a, c, f};
+    o.tile_size = 32;
+    o.summary_dir = "off";
+    const auto layer = Layer::open(o);
+    o.sources = {a};
+    const int cell_deepest = Layer::open(o)->max_zoom();
+    const LonLatBox cb = DemSource::open({c})->footprint(), fb = DemSource::open({f})->footprint();
+    const double mid_lon = (cb.east + fb.west) / 2, mid_lat = (cb.north + fb.south) / 2;
+    std::string layer_json;
+    REQUIRE(layer->document("layer.json", layer_json));
+    const auto available = nlohmann::json::parse(layer_json)["available"];
+    REQUIRE(layer->max_zoom() > cell_deepest);
+    int both_zooms = 0; // zooms deeper than a's with tiles over c and f
+    for (int z = cell_deepest + 1; z <= layer->max_zoom(); ++z) {
+        CAPTURE(z);
+        const auto over = [&](double lon, double lat) {
+            const TileRange r = tiles_covering(
+                Scheme::Geodetic, {lon - 1e-9, lat - 1e-9, lon + 1e-9, lat + 1e-9}, z);
+            return layer->may_have_tile(layer->tile({z, r.x0, r.y0}));
+        };
+        // f goes deeper than c: c's tiles stop at its own deepest zoom, f's go on; while both
+        // have tiles, none lies between them.
+        CHECK(over((fb.west + fb.east) / 2, (fb.south + fb.north) / 2));
+        const bool both = over((cb.west + cb.east) / 2, (cb.south + cb.north) / 2);
+        both_zooms += both ? 1 : 0;
+        CHECK_FALSE(over(mid_lon, mid_lat));
+        const TileRange all = layer->tiles_at(z);
+        std::int64_t tiles = 0;
+        for (std::int64_t y = all.y0; y <= all.y1; ++y) {
+            for (std::int64_t x = all.x0; x <= all.x1; ++x) {
+                tiles += layer->may_have_tile(layer->tile({z, x, y})) ? 1 : 0;
+            }
+        }
+        // No more than the blocks' own families (each block's tiles, widened by one each way).
+        const auto families = [&](const LonLatBox& b) {
+            const TileRange r = tiles_covering(Scheme::Geodetic, b, z);
+            return (r.x1 - r.x0 + 3) * (r.y1 - r.y0 + 3);
+        };
+        CHECK(tiles <= families(cb) + families(fb));
+        CHECK((tiles < all.count() || !both));
+        // layer.json lists the same tiles, range by range.
+        std::int64_t listed = 0;
+        for (const auto& r : available[static_cast<std::size_t>(z)]) {
+            listed += (r["endX"].get<std::int64_t>() - r["startX"].get<std::int64_t>() + 1) *
+                      (r["endY"].get<std::int64_t>() - r["startY"].get<std::int64_t>() + 1);
+        }
+        CHECK(listed >= tiles);
+        CHECK((listed < all.count() || !both));
+    }
+    CHECK(both_zooms >= 2);
 }
 
 TEST_CASE("an interrupted update is finished by running it again; --resume alone is refused "

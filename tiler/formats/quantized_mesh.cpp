@@ -933,6 +933,17 @@ std::string range_json(const TileRange& r) {
            ",\"endX\":" + std::to_string(r.x1) + ",\"endY\":" + std::to_string(r.y1) + "}";
 }
 
+// The non-empty ranges, comma-separated.
+std::string ranges_json(const std::vector<TileRange>& ranges) {
+    std::string out;
+    for (const TileRange& r : ranges) {
+        if (!r.empty()) {
+            out += (out.empty() ? "" : ",") + range_json(r);
+        }
+    }
+    return out;
+}
+
 // Signed doubled area of (a, b, c) in lon/lat.
 double orient(const TileMesh& m, core::Index a, core::Index b, core::Index c) {
     return (m.x[b] - m.x[a]) * (m.y[c] - m.y[a]) - (m.x[c] - m.x[a]) * (m.y[b] - m.y[a]);
@@ -948,17 +959,29 @@ void add_ccw(TileMesh& m, core::Index a, core::Index b, core::Index c) {
 
 } // namespace
 
-TileRange terrain_available(const TerrainSpec& spec, int z) {
+std::vector<TileRange> terrain_available(const TerrainSpec& spec, int z) {
     if (z < 0 || z > spec.max_zoom) {
-        return TileRange{z, 0, 0, -1, -1};
+        return {};
     }
     if (z == 0) {
-        return TileRange{0, 0, 0, 1, 0};
+        return {TileRange{0, 0, 0, 1, 0}};
     }
-    return tiles_in_families(Scheme::Geodetic,
-                             spec.bounds_at ? spec.bounds_at(z) : spec.data_bounds,
-                             spec.data_bounds,
-                             z);
+    std::vector<TileRange> out;
+    for (const LonLatBox& box :
+         spec.bounds_at ? spec.bounds_at(z) : std::vector<LonLatBox>{spec.data_bounds}) {
+        const TileRange r = tiles_in_families(Scheme::Geodetic, box, spec.data_bounds, z);
+        // Ranges may overlap (clients take their union); none lies inside another.
+        const auto inside = [](const TileRange& a, const TileRange& b) {
+            return a.x0 >= b.x0 && a.x1 <= b.x1 && a.y0 >= b.y0 && a.y1 <= b.y1;
+        };
+        if (r.empty() ||
+            std::any_of(out.begin(), out.end(), [&](const TileRange& o) { return inside(r, o); })) {
+            continue;
+        }
+        std::erase_if(out, [&](const TileRange& o) { return inside(o, r); });
+        out.push_back(r);
+    }
+    return out;
 }
 
 std::string terrain_layer_json(const TerrainSpec& spec) {
@@ -975,8 +998,7 @@ std::string terrain_layer_json(const TerrainSpec& spec) {
         terrain_extensions_json(kAllQuantizedMeshExtensions) +
         ",\"metadataAvailability\":" + std::to_string(kMetadataLevels) + ",\"available\":[";
     for (int z = 0; z <= spec.max_zoom; ++z) {
-        const TileRange r = terrain_available(spec, z);
-        out += std::string(z ? "," : "") + "[" + (r.empty() ? "" : range_json(r)) + "]";
+        out += std::string(z ? "," : "") + "[" + ranges_json(terrain_available(spec, z)) + "]";
     }
     const LonLatBox& b = spec.data_bounds;
     out += "],\"data\":{\"minzoom\":" + std::to_string(spec.min_zoom) +
@@ -1015,11 +1037,13 @@ std::string terrain_metadata(const TerrainSpec& spec, const TileId& id, double e
     std::string out = "{\"available\":[";
     for (int k = 1; k <= kMetadataLevels && id.z + k <= kMaxZoom; ++k) {
         const int z = id.z + k;
-        TileRange r = terrain_available(spec, z);
+        std::vector<TileRange> under = terrain_available(spec, z);
         const std::int64_t scale = std::int64_t{1} << k;
-        r.x0 = std::max(r.x0, id.x * scale), r.x1 = std::min(r.x1, id.x * scale + scale - 1);
-        r.y0 = std::max(r.y0, id.y * scale), r.y1 = std::min(r.y1, id.y * scale + scale - 1);
-        out += std::string(k > 1 ? "," : "") + "[" + (r.empty() ? "" : range_json(r)) + "]";
+        for (TileRange& r : under) {
+            r.x0 = std::max(r.x0, id.x * scale), r.x1 = std::min(r.x1, id.x * scale + scale - 1);
+            r.y0 = std::max(r.y0, id.y * scale), r.y1 = std::min(r.y1, id.y * scale + scale - 1);
+        }
+        out += std::string(k > 1 ? "," : "") + "[" + ranges_json(under) + "]";
     }
     out += "],\"filler\":" + std::string(filler ? "true" : "false") +
            ",\"geometricError\":" + (filler ? std::string("null") : number(error)) + "}";

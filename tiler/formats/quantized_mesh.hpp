@@ -156,8 +156,9 @@ struct TerrainSpec {
     int min_zoom = 0, max_zoom = 0; // the zooms meshed from the DEM; coarser ones are filler
     LonLatBox data_bounds;
     std::function<double(int)> eps_for_zoom;
-    // Where zoom z has data, when that differs by zoom (a collection); data_bounds otherwise.
-    std::function<LonLatBox(int)> bounds_at;
+    // Where zoom z has data, when that differs by zoom (a collection: the footprints of its
+    // sources that go that deep, each on its own); data_bounds otherwise.
+    std::function<std::vector<LonLatBox>(int)> bounds_at;
 };
 
 // Levels of child availability each tile's metadata extension lists (layer.json's
@@ -167,7 +168,7 @@ inline constexpr int kMetadataLevels = 10;
 // The tiles layer.json lists as available at zoom z (0..max_zoom): both root tiles at zoom 0,
 // below it the tiles covering the data (zooms under min_zoom hold flat filler there; CesiumJS
 // upsamples every tile not listed from its parent, so no other tile is ever asked for).
-TileRange terrain_available(const TerrainSpec& spec, int z);
+std::vector<TileRange> terrain_available(const TerrainSpec& spec, int z);
 
 // layer.json for CesiumTerrainProvider: tiles "{z}/{x}/{y}.terrain" relative to it, every
 // extension, the availability of every zoom, and where the meshed data begins.

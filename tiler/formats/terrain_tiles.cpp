@@ -63,8 +63,7 @@ available(const TerrainSpec& spec, int root, int level, std::int64_t x, std::int
     if (!tile) {
         return std::nullopt;
     }
-    const TileRange r = terrain_available(spec, level);
-    if (r.empty() || tile->x() < r.x0 || tile->x() > r.x1 || tile->y() < r.y0 || tile->y() > r.y1) {
+    if (!in_any(terrain_available(spec, level), tile->x(), tile->y())) {
         return std::nullopt;
     }
     return tile;

@@ -230,10 +230,13 @@ TerrainSpec terrain_spec_of(const Layer& layer) {
                        [&layer](int z) { return layer.data_bounds_at(z); }};
 }
 
-// Whether tile id is made in format f: DEM and terrain tiles wherever planned, mesh tiles where
-// the layer may have data.
+// Whether tile id is made in format f: DEM tiles wherever planned, terrain tiles where
+// layer.json lists them, mesh tiles where the layer may have data.
 bool makes(const Layer& layer, Format f, const ValidTile& tile) {
-    return is_dem_format(f) || is_terrain_format(f) || layer.may_have_tile(tile);
+    if (is_terrain_format(f)) {
+        return in_any(terrain_available(terrain_spec_of(layer), tile.z()), tile.x(), tile.y());
+    }
+    return is_dem_format(f) || layer.may_have_tile(tile);
 }
 
 // Whether every terrain tile of `format` that layer.json and the terrain tileset list as
@@ -244,19 +247,27 @@ bool terrain_complete(const Layer& layer,
                       const std::string& name,
                       Format format) {
     const TerrainSpec spec = terrain_spec_of(layer);
-    for (int z = 0; z <= spec.max_zoom; ++z) {
-        const TileRange r = terrain_available(spec, z);
+    // The first tile of r missing from the store, if any.
+    const auto missing = [&](const TileRange& r) -> std::optional<TileId> {
         for (std::int64_t y = r.y0; y <= r.y1; ++y) {
             for (std::int64_t x = r.x0; x <= r.x1; ++x) {
-                if (!store.contains(TileKey{name, TileId{z, x, y}, format, -1})) {
-                    log::warn(std::string("build: ") +
-                              (format == Format::Terrain ? "layer.json" : "terrain/tileset.json") +
-                              " not written: it lists " + format_name(format) + " tile " +
-                              tile_name(TileId{z, x, y}) +
-                              ", which is not in the store (build it, e.g. with --resume and no "
-                              "--bbox)");
-                    return false;
+                if (!store.contains(TileKey{name, TileId{r.z, x, y}, format, -1})) {
+                    return TileId{r.z, x, y};
                 }
+            }
+        }
+        return std::nullopt;
+    };
+    for (int z = 0; z <= spec.max_zoom; ++z) {
+        for (const TileRange& r : terrain_available(spec, z)) {
+            if (const std::optional<TileId> id = missing(r)) {
+                log::warn(std::string("build: ") +
+                          (format == Format::Terrain ? "layer.json" : "terrain/tileset.json") +
+                          " not written: it lists " + format_name(format) + " tile " +
+                          tile_name(*id) +
+                          ", which is not in the store (build it, e.g. with --resume and no "
+                          "--bbox)");
+                return false;
             }
         }
     }
@@ -331,12 +342,12 @@ bool write_terrain_tileset(const Layer& layer, TileStore& store, const std::stri
             ++written;
             // The child subtrees are those whose root tile is available.
             const int child = static_cast<int>(level) + kTerrainSubtreeLevels;
-            const TileRange r = terrain_available(terrain_spec_of(layer), child);
+            const std::vector<TileRange> r = terrain_available(terrain_spec_of(layer), child);
             const std::int64_t side = std::int64_t{1} << kTerrainSubtreeLevels;
             const std::int64_t offset = std::int64_t{root} << child;
             for (std::int64_t j = y * side; !r.empty() && j < (y + 1) * side; ++j) {
                 for (std::int64_t i = x * side; i < (x + 1) * side; ++i) {
-                    if (offset + i >= r.x0 && offset + i <= r.x1 && j >= r.y0 && j <= r.y1) {
+                    if (in_any(r, offset + i, j)) {
                         todo.push_back({child, i, j});
                     }
                 }
@@ -365,7 +376,7 @@ Plan make_plan(const Layer& layer, const BuildOptions& o) {
         const TerrainSpec spec = terrain_spec_of(layer);
         add_ranges(
             plan, o, o.layer.scheme, terrain ? 0 : layer.min_zoom(), layer.max_zoom(), [&](int z) {
-                return terrain ? terrain_available(spec, z) : layer.tiles_at(z);
+                return terrain ? bounding(z, terrain_available(spec, z)) : layer.tiles_at(z);
             });
     }
     plan.mesh_total = plan.total;

@@ -94,7 +94,12 @@ LayerPlan::LayerPlan(const LayerOptions& options, const DemSource& source)
     const DemInfo& info = source_.info();
     footprint_ = source_.footprint();
     for (int z = 0; z <= kMaxZoom; ++z) {
-        footprints_.push_back(source_.footprint_at(options_.scheme, z, options_.tile_size));
+        footprints_.push_back(source_.footprints_at(options_.scheme, z, options_.tile_size));
+        std::vector<TileRange> ranges;
+        for (const LonLatBox& box : footprints_.back()) {
+            ranges.push_back(tiles_in_families(options_.scheme, box, footprint_, z));
+        }
+        family_ranges_.push_back(std::move(ranges));
     }
     pixels_ = source_.pixel_grid(options_.scheme);
     summary_ok_ = pixels_ && summary_serves(*pixels_, options_.scheme);
@@ -223,23 +228,37 @@ LatticeBlock LayerPlan::summary_sample(Scheme scheme,
         sum, *pixels_, datum_, scheme, z, size, level, column0, row0, width, height);
 }
 
-LonLatBox LayerPlan::footprint_at(int z) const {
+const std::vector<LonLatBox>& LayerPlan::footprints_at(int z) const {
     TB_ASSERT(z >= 0 && z <= kMaxZoom);
     return footprints_[static_cast<std::size_t>(z)];
+}
+
+LonLatBox LayerPlan::footprint_at(int z) const {
+    const std::vector<LonLatBox>& boxes = footprints_at(z);
+    LonLatBox out = boxes.front();
+    for (const LonLatBox& b : boxes) {
+        out = {std::min(out.west, b.west),
+               std::min(out.south, b.south),
+               std::max(out.east, b.east),
+               std::max(out.north, b.north)};
+    }
+    return out;
 }
 
 TileRange LayerPlan::tiles_at(int z) const {
     if (z < min_zoom_ || z > max_zoom_) {
         return TileRange{z, 0, 0, -1, -1};
     }
-    return tiles_in_families(options_.scheme, footprint_at(z), footprint_, z);
+    return bounding(z, family_ranges_[static_cast<std::size_t>(z)]);
 }
 
 bool LayerPlan::may_have_tile(const ValidTile& tile) const {
     TB_ASSERT(tile.scheme() == options_.scheme);
-    const TileRange r = tiles_at(tile.z());
-    return !r.empty() && tile.x() >= r.x0 && tile.x() <= r.x1 && tile.y() >= r.y0 &&
-           tile.y() <= r.y1;
+    return tile.z() >= min_zoom_ && tile.z() <= max_zoom_ && in_families(tile);
+}
+
+bool LayerPlan::in_families(const ValidTile& tile) const {
+    return in_any(family_ranges_[static_cast<std::size_t>(tile.z())], tile.x(), tile.y());
 }
 
 void LayerPlan::check_data(const ValidTile& tile) const {
@@ -255,10 +274,7 @@ bool LayerPlan::terrain_has_data(const ValidTile& tile) const {
     if (tile.z() < terrain_min_zoom_ || tile.z() > max_zoom_) {
         return false;
     }
-    const TileRange r =
-        tiles_in_families(options_.scheme, footprint_at(tile.z()), footprint_, tile.z());
-    return !r.empty() && tile.x() >= r.x0 && tile.x() <= r.x1 && tile.y() >= r.y0 &&
-           tile.y() <= r.y1;
+    return in_families(tile);
 }
 
 void LayerPlan::check_terrain_data(const ValidTile& tile) const {

@@ -30,8 +30,9 @@ public:
     // The first zoom globe terrain is meshed from the data at (filler on the geoid above it).
     int terrain_min_zoom() const { return terrain_min_zoom_; }
     LonLatBox footprint() const { return footprint_; }
-    // Where zoom z has data (DemSource::footprint_at): the footprint, or for a collection the
-    // part whose sources go that deep.
+    // Where zoom z has data (DemSource::footprints_at): the footprint, or for a collection the
+    // footprints of the sources that go that deep; footprint_at is the box around them.
+    const std::vector<LonLatBox>& footprints_at(int z) const;
     LonLatBox footprint_at(int z) const;
     // The source's pixel grid in the scheme's CRS, if it has one (Layer::guarantee).
     const std::optional<PixelGrid>& pixels() const { return pixels_; }
@@ -51,6 +52,8 @@ public:
     void check_data(const ValidTile& tile) const;
     // Whether a globe terrain tile is meshed from the data (else filler on the geoid).
     bool terrain_has_data(const ValidTile& tile) const;
+    // Whether the tile lies over one of footprints_at(its zoom), in whole families.
+    bool in_families(const ValidTile& tile) const;
     // check_data for a globe terrain tile meshed from the data.
     void check_terrain_data(const ValidTile& tile) const;
 
@@ -111,7 +114,10 @@ private:
     mutable std::once_flag reach_once_;
     mutable std::vector<double> reach_;
     LonLatBox footprint_;
-    std::vector<LonLatBox> footprints_; // footprint_at, zooms 0..kMaxZoom (asked per tile)
+    std::vector<std::vector<LonLatBox>> footprints_; // footprints_at, zooms 0..kMaxZoom
+    // Per zoom, the tiles over each of footprints_at(z) in whole families (tiles_in_families):
+    // those that may hold data (asked per tile).
+    std::vector<std::vector<TileRange>> family_ranges_;
     VerticalDatum datum_ = VerticalDatum::Egm96;
     int min_zoom_ = 0, max_zoom_ = 0;
     int terrain_min_zoom_ = 0;

@@ -305,8 +305,10 @@ std::vector<Grid> grids_of(const Manifest& m, const std::string& which) {
 // shrank, the tiles change: the difference of its old and new extents joins the boxes. Grids
 // are matched by pixel size and overlap; one without a match joins whole. Every tile changes
 // when a matched grid's origin or summary level moved (every read is placed from the origin,
-// and every block of the summary changes), or when one grid becomes several or several one
-// (a collection reads each zoom another way).
+// and every block of the summary changes), when matched grids changed rank (the manifest lists
+// them in rank order and the first wins where they overlap: a file of one grid listed before
+// another grid's files moves it up), or when one grid becomes several or several one (a
+// collection reads each zoom another way).
 void compare_grids(UpdateScope& scope, const Manifest& was, const Manifest& now) {
     std::vector<Grid> before = grids_of(was, "last");
     const std::vector<Grid> after = grids_of(now, "new");
@@ -319,6 +321,7 @@ void compare_grids(UpdateScope& scope, const Manifest& was, const Manifest& now)
     const auto meets = [](const LonLatBox& a, const LonLatBox& b) {
         return a.west <= b.east && b.west <= a.east && a.south <= b.north && b.south <= a.north;
     };
+    std::size_t last_rank = 0; // 1 + the old rank of the last grid matched, in the new order
     for (const Grid& g : after) {
         std::size_t k = 0;
         while (k < before.size() && (matched[k] || before[k].dx != g.dx || before[k].dy != g.dy ||
@@ -330,6 +333,12 @@ void compare_grids(UpdateScope& scope, const Manifest& was, const Manifest& now)
             continue;
         }
         matched[k] = true;
+        if (k + 1 < last_rank) {
+            scope.everything = "the DEMs' pixel grids changed rank (the first wins where they "
+                               "overlap)";
+            return;
+        }
+        last_rank = k + 1;
         for (const auto& [key, was_entry, now_entry] :
              {std::tuple{"origin", &before[k].origin, &g.origin},
               std::tuple{"summary's finest level", &before[k].summary_level, &g.summary_level}}) {

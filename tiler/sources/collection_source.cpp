@@ -98,7 +98,7 @@ public:
     LonLatBox footprint() const override { return footprint_; }
     bool ellipsoidal_heights() const override { return members_.front()->ellipsoidal_heights(); }
 
-    LonLatBox footprint_at(Scheme scheme, int z, int size) const override;
+    std::vector<LonLatBox> footprints_at(Scheme scheme, int z, int size) const override;
 
     // The finest member's: the pyramid goes as deep as the finest data.
     double pixels_per_sample(Scheme scheme, int z, int size) const override {
@@ -156,7 +156,7 @@ private:
 
 // The members whose own pyramid reaches zoom z (the first zoom whose lattice is as fine as
 // their pixels, as LayerPlan plans max_zoom), or past the deepest, the deepest ones.
-LonLatBox CollectionSource::footprint_at(Scheme scheme, int z, int size) const {
+std::vector<LonLatBox> CollectionSource::footprints_at(Scheme scheme, int z, int size) const {
     std::vector<int> deepest(members_.size(), kMaxZoom);
     for (std::size_t m = 0; m < members_.size(); ++m) {
         for (int k = 0; k <= kMaxZoom; ++k) {
@@ -167,15 +167,13 @@ LonLatBox CollectionSource::footprint_at(Scheme scheme, int z, int size) const {
         }
     }
     const int reach = std::min(z, *std::max_element(deepest.begin(), deepest.end()));
-    std::optional<LonLatBox> out;
+    std::vector<LonLatBox> out;
     for (std::size_t m = 0; m < members_.size(); ++m) {
-        if (deepest[m] < reach) {
-            continue;
+        if (deepest[m] >= reach) {
+            out.push_back(members_[m]->footprint());
         }
-        const LonLatBox b = members_[m]->footprint();
-        out = out ? united(*out, b) : b;
     }
-    return *out;
+    return out;
 }
 
 // Each lattice point takes the first member whose sample there is valid.

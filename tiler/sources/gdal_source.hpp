@@ -321,9 +321,12 @@ public:
     // its side in pixels, clipped to the raster. Requires georeferenced().
     virtual double tile_pixels(Scheme scheme, int z, int size) const = 0;
     // Where data as fine as zoom z's lattice or finer lies: the footprint, or for a collection
-    // the footprints of the members that go that deep (the pyramid goes as deep as the finest
-    // source under each region, and no deeper elsewhere). Requires georeferenced().
-    virtual LonLatBox footprint_at(Scheme, int /*z*/, int /*size*/) const { return footprint(); }
+    // the footprints of the members that go that deep, each on its own (the pyramid goes as deep
+    // as the finest source under each region, and no deeper elsewhere: not over the land between
+    // two surveys). Requires georeferenced().
+    virtual std::vector<LonLatBox> footprints_at(Scheme, int /*z*/, int /*size*/) const {
+        return {footprint()};
+    }
     // The DEMs it reads: itself, or each member of a collection (collection_source.hpp).
     virtual std::vector<const DemInfo*> parts() const { return {&info()}; }
     // A collection's members, ranked (the first wins where they overlap); empty for one DEM or
