@@ -193,7 +193,7 @@ std::string describe_pyramid(const tiler::LayerOptions& options) {
                       sizeof line,
                       "    %4d  %-10lld  %8lld x %-8lld  %-10g  %s\n",
                       z,
-                      static_cast<long long>(r.count()),
+                      static_cast<long long>(layer->tile_count_at(z)),
                       static_cast<long long>(r.x1 - r.x0 + 1),
                       static_cast<long long>(r.y1 - r.y0 + 1),
                       layer->eps_for_zoom(z),

@@ -132,6 +132,7 @@ public:
     LonLatBox data_bounds() const override { return plan_.footprint(); }
     std::vector<LonLatBox> data_bounds_at(int z) const override { return plan_.footprints_at(z); }
     TileRange tiles_at(int z) const override { return plan_.tiles_at(z); }
+    std::int64_t tile_count_at(int z) const override { return plan_.tile_count_at(z); }
     bool may_have_tile(const ValidTile& tile) const override { return plan_.may_have_tile(tile); }
     ZoomSource zoom_source(int z) const override { return plan_.zoom_source(z); }
 

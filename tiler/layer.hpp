@@ -151,6 +151,9 @@ public:
     // that go that deep (DemSource::footprints_at).
     virtual std::vector<LonLatBox> data_bounds_at(int z) const = 0;
     virtual TileRange tiles_at(int z) const = 0; // tiles of zoom z that may hold data
+    // How many tiles of zoom z may hold data (may_have_tile): tiles_at(z)'s, or fewer for a
+    // collection whose groups lie apart.
+    virtual std::int64_t tile_count_at(int z) const = 0;
     // Whether a tile of the layer's scheme lies in tiles_at of its zoom.
     virtual bool may_have_tile(const ValidTile& tile) const = 0;
     // The id as a tile of the layer's scheme (ValidTile::parse: InputError outside it).

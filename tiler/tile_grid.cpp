@@ -218,6 +218,36 @@ TileRange bounding(int z, const std::vector<TileRange>& ranges) {
     return out;
 }
 
+// How many tiles the rectangles cover together: a sweep over the rows where they start or end,
+// merging each band's column intervals (never a walk over every tile of a zoom).
+std::int64_t union_count(const std::vector<TileRange>& rects) {
+    std::vector<std::int64_t> rows;
+    for (const TileRange& r : rects) {
+        rows.push_back(r.y0);
+        rows.push_back(r.y1 + 1);
+    }
+    std::sort(rows.begin(), rows.end());
+    rows.erase(std::unique(rows.begin(), rows.end()), rows.end());
+    std::int64_t area = 0;
+    for (std::size_t i = 0; i + 1 < rows.size(); ++i) {
+        std::vector<std::pair<std::int64_t, std::int64_t>> spans;
+        for (const TileRange& r : rects) {
+            if (r.y0 <= rows[i] && rows[i] <= r.y1) {
+                spans.push_back({r.x0, r.x1});
+            }
+        }
+        std::sort(spans.begin(), spans.end());
+        std::int64_t covered = 0, end = std::numeric_limits<std::int64_t>::min();
+        for (const auto& [x0, x1] : spans) {
+            const std::int64_t from = std::max(x0, end + 1);
+            covered += x1 >= from ? x1 - from + 1 : 0;
+            end = std::max(end, x1);
+        }
+        area += covered * (rows[i + 1] - rows[i]);
+    }
+    return area;
+}
+
 TileRange tiles_in_families(Scheme scheme, const LonLatBox& deep, const LonLatBox& all, int z) {
     TileRange r = tiles_covering(scheme, deep, z);
     if (r.empty() || z == 0) {

@@ -41,6 +41,8 @@ struct TileRange {
 bool in_any(const std::vector<TileRange>& ranges, std::int64_t x, std::int64_t y);
 // The smallest range of zoom z holding every one of `ranges` (empty when they all are).
 TileRange bounding(int z, const std::vector<TileRange>& ranges);
+// How many tiles the ranges (of one zoom) cover together, each counted once.
+std::int64_t union_count(const std::vector<TileRange>& ranges);
 
 inline constexpr int kMaxZoom = 24;
 

@@ -57,6 +57,7 @@ public:
         return inner_->data_bounds_at(z);
     }
     tiler::TileRange tiles_at(int z) const override { return inner_->tiles_at(z); }
+    std::int64_t tile_count_at(int z) const override { return inner_->tile_count_at(z); }
     bool may_have_tile(const tiler::ValidTile& tile) const override {
         return inner_->may_have_tile(tile);
     }

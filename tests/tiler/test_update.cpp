@@ -308,6 +308,7 @@ TEST_CASE("depth follows each DEM: the zooms only two far-apart blocks reach hav
             return (r.x1 - r.x0 + 3) * (r.y1 - r.y0 + 3);
         };
         CHECK(tiles <= families(cb) + families(fb));
+        CHECK(layer->tile_count_at(z) == tiles); // what info prints
         CHECK((tiles < all.count() || !both));
         // layer.json lists the same tiles, range by range.
         std::int64_t listed = 0;

@@ -252,6 +252,13 @@ TileRange LayerPlan::tiles_at(int z) const {
     return bounding(z, family_ranges_[static_cast<std::size_t>(z)]);
 }
 
+std::int64_t LayerPlan::tile_count_at(int z) const {
+    if (z < min_zoom_ || z > max_zoom_) {
+        return 0;
+    }
+    return union_count(family_ranges_[static_cast<std::size_t>(z)]);
+}
+
 bool LayerPlan::may_have_tile(const ValidTile& tile) const {
     TB_ASSERT(tile.scheme() == options_.scheme);
     return tile.z() >= min_zoom_ && tile.z() <= max_zoom_ && in_families(tile);

@@ -47,6 +47,7 @@ public:
 
     // Layer::tiles_at and Layer::may_have_tile. Tiles are of the layer's scheme (asserted).
     TileRange tiles_at(int z) const;
+    std::int64_t tile_count_at(int z) const;
     bool may_have_tile(const ValidTile& tile) const;
     // Throws NotFound, naming the layer's zooms, for a tile with no data.
     void check_data(const ValidTile& tile) const;

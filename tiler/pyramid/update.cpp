@@ -358,36 +358,6 @@ void compare_grids(UpdateScope& scope, const Manifest& was, const Manifest& now)
     add_difference(scope, box_of(was, "data_bounds", "last"), box_of(now, "data_bounds", "new"));
 }
 
-// How many tiles the rectangles cover together: a sweep over the rows where they start or end,
-// merging each band's column intervals (never a walk over every tile of a zoom).
-std::int64_t union_area(const std::vector<TileRange>& rects) {
-    std::vector<std::int64_t> rows;
-    for (const TileRange& r : rects) {
-        rows.push_back(r.y0);
-        rows.push_back(r.y1 + 1);
-    }
-    std::sort(rows.begin(), rows.end());
-    rows.erase(std::unique(rows.begin(), rows.end()), rows.end());
-    std::int64_t area = 0;
-    for (std::size_t i = 0; i + 1 < rows.size(); ++i) {
-        std::vector<std::pair<std::int64_t, std::int64_t>> spans;
-        for (const TileRange& r : rects) {
-            if (r.y0 <= rows[i] && rows[i] <= r.y1) {
-                spans.push_back({r.x0, r.x1});
-            }
-        }
-        std::sort(spans.begin(), spans.end());
-        std::int64_t covered = 0, end = std::numeric_limits<std::int64_t>::min();
-        for (const auto& [x0, x1] : spans) {
-            const std::int64_t from = std::max(x0, end + 1);
-            covered += x1 >= from ? x1 - from + 1 : 0;
-            end = std::max(end, x1);
-        }
-        area += covered * (rows[i + 1] - rows[i]);
-    }
-    return area;
-}
-
 } // namespace
 
 std::string source_grids_entry(const Layer& layer) {
@@ -626,7 +596,7 @@ std::vector<TileRange> UpdateTiles::left_out_at(int z) const {
 std::int64_t UpdateTiles::left_out_count() const {
     std::int64_t n = 0;
     for (const auto& [z, ranges] : touched_) {
-        n += union_area(left_out_at(z));
+        n += union_count(left_out_at(z));
     }
     return n;
 }
@@ -660,7 +630,7 @@ std::int64_t UpdateTiles::remade() const {
                 rects.push_back(c);
             }
         }
-        n += union_area(rects);
+        n += union_count(rects);
     }
     return n;
 }
