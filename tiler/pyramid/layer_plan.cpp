@@ -23,14 +23,15 @@ namespace {
 // east and north, as a DEM's resolution_m measures a pixel) over kStepPerEps, on a step of
 // on_step. So a DEM finer than all before (a survey over SRTM) deepens the pyramid without
 // moving any zoom's eps, and build --update remakes only the tiles over it.
-// kStepPerEps = 45 * 2^18 / (180 * 1200): the lattice step at SRTM 3"'s own zoom is 216000/262144
-// of its pixel, so DEMs of 3"/2^k keep the eps they had when it was their resolution / 45: 2 m
-// for SRTM 3" (~90 m) at its zoom. That is a third of SRTM's relative vertical accuracy (about
-// 6 m, 90% linear error) and four times its 1 m integer quantization, so the mesh error stays
-// well below the data's own noise while the meshes stay small; it is also far below CesiumJS's
-// level geometric error (77067 m / 2^z, about 75 m at SRTM 3"'s z = 10). Other resolutions get
-// 0.61-1.21 times their resolution / 45 at their finest zoom (SRTM 1": 0.75), whose lattice step
-// lies between half a pixel and a pixel.
+// kStepPerEps = 45 * 2^18 / (180 * 1200): in the geodetic scheme with tiles of 2^k samples, the
+// lattice step at SRTM 3"'s own zoom is 216000/262144 of its pixel, so DEMs of 3"/2^k keep the eps
+// they had when it was their resolution / 45: 2 m for SRTM 3" (~90 m) at its zoom. That is a third
+// of SRTM's relative vertical accuracy (about 6 m, 90% linear error) and four times its 1 m integer
+// quantization, so the mesh error stays well below the data's own noise while the meshes stay
+// small; it is also far below CesiumJS's level geometric error (77067 m / 2^z, about 75 m at SRTM
+// 3"'s z = 10). Other resolutions, tile sizes and the mercator scheme get 0.61-1.21 times their
+// resolution / 45 at their finest zoom (SRTM 1": 0.75), whose lattice step lies between half a
+// pixel and a pixel.
 constexpr double kStepPerEps = 45.0 * 216000.0 / 262144.0;
 
 // Ground metres of one lattice step of zoom z at latitude `lat` (degrees), the geometric mean
@@ -231,18 +232,6 @@ LatticeBlock LayerPlan::summary_sample(Scheme scheme,
 const std::vector<LonLatBox>& LayerPlan::footprints_at(int z) const {
     TB_ASSERT(z >= 0 && z <= kMaxZoom);
     return footprints_[static_cast<std::size_t>(z)];
-}
-
-LonLatBox LayerPlan::footprint_at(int z) const {
-    const std::vector<LonLatBox>& boxes = footprints_at(z);
-    LonLatBox out = boxes.front();
-    for (const LonLatBox& b : boxes) {
-        out = {std::min(out.west, b.west),
-               std::min(out.south, b.south),
-               std::max(out.east, b.east),
-               std::max(out.north, b.north)};
-    }
-    return out;
 }
 
 TileRange LayerPlan::tiles_at(int z) const {

@@ -31,9 +31,8 @@ public:
     int terrain_min_zoom() const { return terrain_min_zoom_; }
     LonLatBox footprint() const { return footprint_; }
     // Where zoom z has data (DemSource::footprints_at): the footprint, or for a collection the
-    // footprints of the sources that go that deep; footprint_at is the box around them.
+    // footprints of the sources that go that deep.
     const std::vector<LonLatBox>& footprints_at(int z) const;
-    LonLatBox footprint_at(int z) const;
     // The source's pixel grid in the scheme's CRS, if it has one (Layer::guarantee).
     const std::optional<PixelGrid>& pixels() const { return pixels_; }
     VerticalDatum datum() const { return datum_; }
@@ -53,8 +52,6 @@ public:
     void check_data(const ValidTile& tile) const;
     // Whether a globe terrain tile is meshed from the data (else filler on the geoid).
     bool terrain_has_data(const ValidTile& tile) const;
-    // Whether the tile lies over one of footprints_at(its zoom), in whole families.
-    bool in_families(const ValidTile& tile) const;
     // check_data for a globe terrain tile meshed from the data.
     void check_terrain_data(const ValidTile& tile) const;
 
@@ -100,6 +97,8 @@ public:
     void prepare() const;
 
 private:
+    // Whether the tile lies over one of footprints_at(its zoom), in whole families.
+    bool in_families(const ValidTile& tile) const;
     void plan_zooms();
     double tile_pixels(int z) const;
     void compute_height_range();

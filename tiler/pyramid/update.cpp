@@ -266,7 +266,6 @@ LonLatBox box_of(const Manifest& m, const std::string& key, const std::string& w
     return {b[0].get<double>(), b[1].get<double>(), b[2].get<double>(), b[3].get<double>()};
 }
 
-// A pixel grid as source_grids_entry records it: pixel size, then lon/lat extent.
 // A pixel grid as the manifest lists it: source_grids, grid_origins and summary_levels, one
 // entry per grid in the same order.
 struct Grid {
