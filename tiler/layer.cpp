@@ -130,7 +130,7 @@ public:
     double eps_for_zoom(int z) const override { return plan_.eps_for_zoom(z); }
     double terrain_eps_for_zoom(int z) const override { return plan_.terrain_eps_for_zoom(z); }
     LonLatBox data_bounds() const override { return plan_.footprint(); }
-    std::vector<LonLatBox> data_bounds_at(int z) const override { return plan_.footprints_at(z); }
+    const TileCover& data_cover_at(int z) const override { return plan_.cover_at(z); }
     TileRange tiles_at(int z) const override { return plan_.tiles_at(z); }
     std::int64_t tile_count_at(int z) const override { return plan_.tile_count_at(z); }
     bool may_have_tile(const ValidTile& tile) const override { return plan_.may_have_tile(tile); }

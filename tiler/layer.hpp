@@ -147,9 +147,10 @@ public:
     // share of CesiumJS's own level error where that is larger.
     virtual double terrain_eps_for_zoom(int z) const = 0;
     virtual LonLatBox data_bounds() const = 0; // the sources' extent in lon/lat
-    // Where zoom z has data: data_bounds(), or for a collection the footprints of the sources
-    // that go that deep (DemSource::footprints_at).
-    virtual std::vector<LonLatBox> data_bounds_at(int z) const = 0;
+    // The tiles of zoom z (0..kMaxZoom, whatever the layer's zooms) over the data that goes
+    // that deep, in whole families: over each DEM file's footprint, not the box around them
+    // (LayerPlan::cover_at).
+    virtual const TileCover& data_cover_at(int z) const = 0;
     virtual TileRange tiles_at(int z) const = 0; // tiles of zoom z that may hold data
     // How many tiles of zoom z may hold data (may_have_tile): tiles_at(z)'s, or fewer for a
     // collection whose groups lie apart.

@@ -197,11 +197,6 @@ TileRange tiles_covering(Scheme scheme, const LonLatBox& box, int z) {
     return range;
 }
 
-bool in_any(const std::vector<TileRange>& ranges, std::int64_t x, std::int64_t y) {
-    return std::any_of(
-        ranges.begin(), ranges.end(), [&](const TileRange& r) { return r.contains(x, y); });
-}
-
 TileRange bounding(int z, const std::vector<TileRange>& ranges) {
     TileRange out{z, 0, 0, -1, -1};
     for (const TileRange& r : ranges) {
@@ -218,34 +213,106 @@ TileRange bounding(int z, const std::vector<TileRange>& ranges) {
     return out;
 }
 
-// How many tiles the rectangles cover together: a sweep over the rows where they start or end,
-// merging each band's column intervals (never a walk over every tile of a zoom).
 std::int64_t union_count(const std::vector<TileRange>& rects) {
-    std::vector<std::int64_t> rows;
-    for (const TileRange& r : rects) {
-        rows.push_back(r.y0);
-        rows.push_back(r.y1 + 1);
+    return TileCover(0, rects).count();
+}
+
+namespace {
+
+using Spans = std::vector<std::pair<std::int64_t, std::int64_t>>;
+
+// The union of the column spans of `active`, sorted and apart (touching spans joined).
+Spans merged_spans(const std::vector<const TileRange*>& active) {
+    Spans spans;
+    spans.reserve(active.size());
+    for (const TileRange* r : active) {
+        spans.push_back({r->x0, r->x1});
     }
+    std::sort(spans.begin(), spans.end());
+    Spans out;
+    for (const auto& s : spans) {
+        if (!out.empty() && s.first <= out.back().second + 1) {
+            out.back().second = std::max(out.back().second, s.second);
+        } else {
+            out.push_back(s);
+        }
+    }
+    return out;
+}
+
+} // namespace
+
+// A sweep over the rows where ranges start or end: between two such rows the same ranges are
+// active, so one band holds their merged spans (never a walk over every tile of the zoom).
+TileCover::TileCover(int z, const std::vector<TileRange>& ranges) : z_(z) {
+    std::vector<const TileRange*> by_start;
+    std::vector<std::int64_t> rows;
+    for (const TileRange& r : ranges) {
+        if (!r.empty()) {
+            by_start.push_back(&r);
+            rows.push_back(r.y0);
+            rows.push_back(r.y1 + 1);
+        }
+    }
+    std::sort(by_start.begin(), by_start.end(), [](const TileRange* a, const TileRange* b) {
+        return a->y0 < b->y0;
+    });
     std::sort(rows.begin(), rows.end());
     rows.erase(std::unique(rows.begin(), rows.end()), rows.end());
-    std::int64_t area = 0;
+    std::vector<const TileRange*> active;
+    std::size_t next = 0;
     for (std::size_t i = 0; i + 1 < rows.size(); ++i) {
-        std::vector<std::pair<std::int64_t, std::int64_t>> spans;
-        for (const TileRange& r : rects) {
-            if (r.y0 <= rows[i] && rows[i] <= r.y1) {
-                spans.push_back({r.x0, r.x1});
-            }
+        const std::int64_t y0 = rows[i], y1 = rows[i + 1] - 1;
+        std::erase_if(active, [&](const TileRange* r) { return r->y1 < y0; });
+        for (; next < by_start.size() && by_start[next]->y0 <= y0; ++next) {
+            active.push_back(by_start[next]);
         }
-        std::sort(spans.begin(), spans.end());
-        std::int64_t covered = 0, end = std::numeric_limits<std::int64_t>::min();
-        for (const auto& [x0, x1] : spans) {
-            const std::int64_t from = std::max(x0, end + 1);
-            covered += x1 >= from ? x1 - from + 1 : 0;
-            end = std::max(end, x1);
+        if (active.empty()) {
+            continue;
         }
-        area += covered * (rows[i + 1] - rows[i]);
+        Spans spans = merged_spans(active);
+        if (!bands_.empty() && bands_.back().y1 + 1 == y0 && bands_.back().spans == spans) {
+            bands_.back().y1 = y1;
+        } else {
+            bands_.push_back(Band{y0, y1, std::move(spans)});
+        }
     }
-    return area;
+}
+
+bool TileCover::contains(std::int64_t x, std::int64_t y) const {
+    const auto band = std::upper_bound(
+        bands_.begin(), bands_.end(), y, [](std::int64_t v, const Band& b) { return v < b.y0; });
+    if (band == bands_.begin() || y > std::prev(band)->y1) {
+        return false;
+    }
+    const Spans& spans = std::prev(band)->spans;
+    const auto span = std::upper_bound(
+        spans.begin(), spans.end(), x, [](std::int64_t v, const auto& s) { return v < s.first; });
+    return span != spans.begin() && x <= std::prev(span)->second;
+}
+
+std::int64_t TileCover::count() const {
+    std::int64_t n = 0;
+    for (const Band& b : bands_) {
+        for (const auto& [x0, x1] : b.spans) {
+            n += (x1 - x0 + 1) * (b.y1 - b.y0 + 1);
+        }
+    }
+    return n;
+}
+
+TileRange TileCover::bounding() const {
+    return tiler::bounding(z_, ranges());
+}
+
+std::vector<TileRange> TileCover::ranges() const {
+    std::vector<TileRange> out;
+    for (const Band& b : bands_) {
+        for (const auto& [x0, x1] : b.spans) {
+            out.push_back(TileRange{z_, x0, b.y0, x1, b.y1});
+        }
+    }
+    return out;
 }
 
 TileRange tiles_in_families(Scheme scheme, const LonLatBox& deep, const LonLatBox& all, int z) {

@@ -7,6 +7,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 namespace tb::tiler {
@@ -37,12 +38,37 @@ struct TileRange {
     }
 };
 
-// Whether tile (x, y) lies in one of the ranges.
-bool in_any(const std::vector<TileRange>& ranges, std::int64_t x, std::int64_t y);
 // The smallest range of zoom z holding every one of `ranges` (empty when they all are).
 TileRange bounding(int z, const std::vector<TileRange>& ranges);
 // How many tiles the ranges (of one zoom) cover together, each counted once.
 std::int64_t union_count(const std::vector<TileRange>& ranges);
+
+// The tiles of one zoom that any of some ranges holds, kept as disjoint rectangles: bands of
+// rows, each with its sorted, disjoint column spans, and next bands with the same spans joined.
+// So thousands of overlapping ranges (one per file of a collection) are looked up in
+// logarithmic time, counted exactly, and listed as few rectangles as their union allows: the
+// files of a regular grid become one rectangle.
+class TileCover {
+public:
+    TileCover() = default;
+    TileCover(int z, const std::vector<TileRange>& ranges);
+
+    int z() const { return z_; }
+    bool empty() const { return bands_.empty(); }
+    bool contains(std::int64_t x, std::int64_t y) const;
+    std::int64_t count() const;
+    TileRange bounding() const;
+    // The disjoint rectangles, by band from the first row, then by column.
+    std::vector<TileRange> ranges() const;
+
+private:
+    struct Band {
+        std::int64_t y0 = 0, y1 = -1;
+        std::vector<std::pair<std::int64_t, std::int64_t>> spans; // [x0, x1], sorted, apart
+    };
+    int z_ = 0;
+    std::vector<Band> bands_; // by y0, apart
+};
 
 inline constexpr int kMaxZoom = 24;
 

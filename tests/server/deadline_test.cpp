@@ -53,9 +53,7 @@ public:
     double eps_for_zoom(int z) const override { return inner_->eps_for_zoom(z); }
     double terrain_eps_for_zoom(int z) const override { return inner_->terrain_eps_for_zoom(z); }
     tiler::LonLatBox data_bounds() const override { return inner_->data_bounds(); }
-    std::vector<tiler::LonLatBox> data_bounds_at(int z) const override {
-        return inner_->data_bounds_at(z);
-    }
+    const tiler::TileCover& data_cover_at(int z) const override { return inner_->data_cover_at(z); }
     tiler::TileRange tiles_at(int z) const override { return inner_->tiles_at(z); }
     std::int64_t tile_count_at(int z) const override { return inner_->tile_count_at(z); }
     bool may_have_tile(const tiler::ValidTile& tile) const override {

@@ -262,3 +262,65 @@ TEST_CASE("scheme names parse, and an unknown one is an input error naming it") 
         CHECK(std::string(e.what()).find("'utm'") != std::string::npos);
     }
 }
+
+TEST_CASE("a tile cover holds exactly the union of its ranges, as disjoint rectangles (seed 11)") {
+    std::mt19937 rng(11);
+    std::uniform_int_distribution<std::int64_t> at(0, 40), size(0, 9);
+    for (int round = 0; round < 50; ++round) {
+        CAPTURE(round);
+        std::vector<TileRange> ranges;
+        const int n = 1 + round % 12;
+        for (int k = 0; k < n; ++k) {
+            const std::int64_t x0 = at(rng), y0 = at(rng);
+            ranges.push_back({5, x0, y0, x0 + size(rng), y0 + size(rng)});
+        }
+        ranges.push_back({5, 3, 3, 2, 2}); // an empty range adds nothing
+        const TileCover cover(5, ranges);
+        std::set<std::pair<std::int64_t, std::int64_t>> truth;
+        for (const TileRange& r : ranges) {
+            for (std::int64_t y = r.y0; y <= r.y1; ++y) {
+                for (std::int64_t x = r.x0; x <= r.x1; ++x) {
+                    truth.insert({x, y});
+                }
+            }
+        }
+        CHECK(cover.count() == static_cast<std::int64_t>(truth.size()));
+        CHECK(union_count(ranges) == cover.count());
+        for (std::int64_t y = -1; y <= 51; ++y) {
+            for (std::int64_t x = -1; x <= 51; ++x) {
+                REQUIRE(cover.contains(x, y) == (truth.count({x, y}) > 0));
+            }
+        }
+        // The rectangles are disjoint and hold the union: their counts add up to it.
+        std::int64_t listed = 0;
+        for (const TileRange& r : cover.ranges()) {
+            CHECK(r.z == 5);
+            CHECK_FALSE(r.empty());
+            listed += r.count();
+        }
+        CHECK(listed == cover.count());
+        const TileRange box = cover.bounding(), want = bounding(5, ranges);
+        CHECK((box.x0 == want.x0 && box.y0 == want.y0 && box.x1 == want.x1 && box.y1 == want.y1));
+    }
+}
+
+TEST_CASE("a tile cover joins the ranges of a regular grid of files into one rectangle, and "
+          "keeps scattered ones apart") {
+    std::vector<TileRange> grid;
+    for (std::int64_t j = 0; j < 30; ++j) {
+        for (std::int64_t i = 0; i < 40; ++i) {
+            // Each file's tiles, overlapping its neighbours' by one tile, as families do.
+            grid.push_back({9, 100 + 4 * i, 50 + 4 * j, 100 + 4 * i + 4, 50 + 4 * j + 4});
+        }
+    }
+    const std::vector<TileRange> one = TileCover(9, grid).ranges();
+    REQUIRE(one.size() == 1);
+    CHECK((one[0].x0 == 100 && one[0].y0 == 50 && one[0].x1 == 260 && one[0].y1 == 170));
+    const TileCover apart(9, {{9, 0, 0, 1, 1}, {9, 10, 0, 11, 1}, {9, 0, 10, 1, 11}});
+    CHECK(apart.ranges().size() == 3);
+    CHECK(apart.count() == 12);
+    CHECK_FALSE(apart.contains(5, 0));
+    CHECK(TileCover(9, {}).empty());
+    CHECK_FALSE(TileCover(9, {}).contains(0, 0));
+    CHECK(TileCover(9, {}).bounding().empty());
+}

@@ -322,6 +322,65 @@ TEST_CASE("depth follows each DEM: the zooms only two far-apart blocks reach hav
     CHECK(both_zooms >= 2);
 }
 
+TEST_CASE("depth follows each file of one grid: far-apart blocks of one survey get deep tiles "
+          "over each block only, and the update adding a third equals a full build") {
+    // c and c2 share a pixel grid (one mosaic, one DEM group), 0.4 degrees apart, over the
+    // coarser cell a; c3 later fills a third corner of the square they span.
+    ScratchDir dir;
+    const double step = 0.1 / 96;
+    const std::string a = cell_a(dir), c = finer_block_c(dir);
+    const std::string c2 = write_dem(dir.file("c2.tif"), 8.6, 46.9, 97, 97, step, 3);
+    const std::string c3 = write_dem(dir.file("c3.tif"), 8.6, 46.5, 97, 97, step, 4);
+    LayerOptions o;
+    o.sources = {a, c, c2};
+    o.tile_size = 32;
+    o.summary_dir = "off";
+    const auto layer = Layer::open(o);
+    o.sources = {a};
+    const int cell_deepest = Layer::open(o)->max_zoom();
+    REQUIRE(layer->source().members().size() == 2); // a, and the mosaic of c and c2
+    const LonLatBox cb = DemSource::open({c})->footprint(),
+                    c2b = DemSource::open({c2})->footprint();
+    std::string layer_json;
+    REQUIRE(layer->document("layer.json", layer_json));
+    const auto available = nlohmann::json::parse(layer_json)["available"];
+    REQUIRE(layer->max_zoom() > cell_deepest);
+    for (int z = cell_deepest + 1; z <= layer->max_zoom(); ++z) {
+        CAPTURE(z);
+        const auto over = [&](double lon, double lat) {
+            const TileRange r = tiles_covering(
+                Scheme::Geodetic, {lon - 1e-9, lat - 1e-9, lon + 1e-9, lat + 1e-9}, z);
+            return layer->may_have_tile(layer->tile({z, r.x0, r.y0}));
+        };
+        CHECK(over((cb.west + cb.east) / 2, (cb.south + cb.north) / 2));
+        CHECK(over((c2b.west + c2b.east) / 2, (c2b.south + c2b.north) / 2));
+        CHECK_FALSE(over((cb.east + c2b.west) / 2, (cb.north + c2b.south) / 2)); // between
+        CHECK_FALSE(over((c2b.west + c2b.east) / 2, (cb.south + cb.north) / 2)); // c3's corner
+        const TileRange all = layer->tiles_at(z);
+        std::int64_t tiles = 0;
+        for (std::int64_t y = all.y0; y <= all.y1; ++y) {
+            for (std::int64_t x = all.x0; x <= all.x1; ++x) {
+                tiles += layer->may_have_tile(layer->tile({z, x, y})) ? 1 : 0;
+            }
+        }
+        CHECK(layer->tile_count_at(z) == tiles);
+        CHECK(tiles < all.count());
+        // layer.json lists exactly those tiles, in rectangles that do not overlap.
+        std::int64_t listed = 0;
+        for (const auto& r : available[static_cast<std::size_t>(z)]) {
+            listed += (r["endX"].get<std::int64_t>() - r["startX"].get<std::int64_t>() + 1) *
+                      (r["endY"].get<std::int64_t>() - r["startY"].get<std::int64_t>() + 1);
+        }
+        CHECK(listed == tiles);
+    }
+    const std::string out = dir.file("out");
+    build(options({a, c, c2}, out));
+    check_same_as_full(
+        {a, c, c2, c3}, out, dir.file("fresh"), build(options({a, c, c2, c3}, out), true));
+    // c3 removed again: its deep tiles go, though the box around c and c2 still holds them.
+    check_same_as_full({a, c, c2}, out, dir.file("fresh"), build(options({a, c, c2}, out), true));
+}
+
 TEST_CASE("an interrupted update is finished by running it again; --resume alone is refused "
           "while it is pending") {
     const TwoDems two;

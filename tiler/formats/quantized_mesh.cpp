@@ -966,22 +966,25 @@ std::vector<TileRange> terrain_available(const TerrainSpec& spec, int z) {
     if (z == 0) {
         return {TileRange{0, 0, 0, 1, 0}};
     }
-    std::vector<TileRange> out;
-    for (const LonLatBox& box :
-         spec.bounds_at ? spec.bounds_at(z) : std::vector<LonLatBox>{spec.data_bounds}) {
-        const TileRange r = tiles_in_families(Scheme::Geodetic, box, spec.data_bounds, z);
-        // Ranges may overlap (clients take their union); none lies inside another.
-        const auto inside = [](const TileRange& a, const TileRange& b) {
-            return a.x0 >= b.x0 && a.x1 <= b.x1 && a.y0 >= b.y0 && a.y1 <= b.y1;
-        };
-        if (r.empty() ||
-            std::any_of(out.begin(), out.end(), [&](const TileRange& o) { return inside(r, o); })) {
-            continue;
-        }
-        std::erase_if(out, [&](const TileRange& o) { return inside(o, r); });
-        out.push_back(r);
+    if (spec.available_at) {
+        return spec.available_at(z).ranges();
     }
-    return out;
+    const TileRange r = tiles_in_families(Scheme::Geodetic, spec.data_bounds, spec.data_bounds, z);
+    return r.empty() ? std::vector<TileRange>{} : std::vector<TileRange>{r};
+}
+
+bool terrain_lists(const TerrainSpec& spec, const TileId& id) {
+    if (id.z < 0 || id.z > spec.max_zoom) {
+        return false;
+    }
+    if (id.z == 0) {
+        return (id.x == 0 || id.x == 1) && id.y == 0;
+    }
+    if (spec.available_at) {
+        return spec.available_at(id.z).contains(id.x, id.y);
+    }
+    return tiles_in_families(Scheme::Geodetic, spec.data_bounds, spec.data_bounds, id.z)
+        .contains(id.x, id.y);
 }
 
 std::string terrain_layer_json(const TerrainSpec& spec) {
@@ -1043,7 +1046,10 @@ std::string terrain_metadata(const TerrainSpec& spec, const TileId& id, double e
             r.x0 = std::max(r.x0, id.x * scale), r.x1 = std::min(r.x1, id.x * scale + scale - 1);
             r.y0 = std::max(r.y0, id.y * scale), r.y1 = std::min(r.y1, id.y * scale + scale - 1);
         }
-        out += std::string(k > 1 ? "," : "") + "[" + ranges_json(under) + "]";
+        // Listed as the tiles under this one alone make them: data far away, which splits the
+        // zoom's rectangles elsewhere, leaves this tile's bytes as they are (build --update).
+        out +=
+            std::string(k > 1 ? "," : "") + "[" + ranges_json(TileCover(z, under).ranges()) + "]";
     }
     out += "],\"filler\":" + std::string(filler ? "true" : "false") +
            ",\"geometricError\":" + (filler ? std::string("null") : number(error)) + "}";

@@ -156,9 +156,9 @@ struct TerrainSpec {
     int min_zoom = 0, max_zoom = 0; // the zooms meshed from the DEM; coarser ones are filler
     LonLatBox data_bounds;
     std::function<double(int)> eps_for_zoom;
-    // Where zoom z has data, when that differs by zoom (a collection: the footprints of its
-    // sources that go that deep, each on its own); data_bounds otherwise.
-    std::function<std::vector<LonLatBox>(int)> bounds_at;
+    // The tiles of zoom z over the data that goes that deep (Layer::data_cover_at; geodetic);
+    // without it, those over data_bounds in whole families.
+    std::function<const TileCover&(int)> available_at;
 };
 
 // Levels of child availability each tile's metadata extension lists (layer.json's
@@ -169,6 +169,8 @@ inline constexpr int kMetadataLevels = 10;
 // below it the tiles covering the data (zooms under min_zoom hold flat filler there; CesiumJS
 // upsamples every tile not listed from its parent, so no other tile is ever asked for).
 std::vector<TileRange> terrain_available(const TerrainSpec& spec, int z);
+// Whether terrain_available(spec, id.z) holds tile id (geodetic), without listing the ranges.
+bool terrain_lists(const TerrainSpec& spec, const TileId& id);
 
 // layer.json for CesiumTerrainProvider: tiles "{z}/{x}/{y}.terrain" relative to it, every
 // extension, the availability of every zoom, and where the meshed data begins.

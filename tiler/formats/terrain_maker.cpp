@@ -108,7 +108,7 @@ TerrainSpec TerrainMaker::terrain_spec() const {
                        plan_.max_zoom(),
                        plan_.footprint(),
                        [this](int z) { return plan_.terrain_eps_for_zoom(z); },
-                       [this](int z) { return plan_.footprints_at(z); }};
+                       [this](int z) -> const TileCover& { return plan_.cover_at(z); }};
 }
 
 // What the terrain tileset publishes. Heights: every tile's vertices lie within the

@@ -63,7 +63,7 @@ available(const TerrainSpec& spec, int root, int level, std::int64_t x, std::int
     if (!tile) {
         return std::nullopt;
     }
-    if (!in_any(terrain_available(spec, level), tile->x(), tile->y())) {
+    if (!terrain_lists(spec, tile->id())) {
         return std::nullopt;
     }
     return tile;

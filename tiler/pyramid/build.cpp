@@ -227,14 +227,14 @@ TerrainSpec terrain_spec_of(const Layer& layer) {
                        layer.max_zoom(),
                        layer.data_bounds(),
                        [&layer](int z) { return layer.eps_for_zoom(z); },
-                       [&layer](int z) { return layer.data_bounds_at(z); }};
+                       [&layer](int z) -> const TileCover& { return layer.data_cover_at(z); }};
 }
 
 // Whether tile id is made in format f: DEM tiles wherever planned, terrain tiles where
 // layer.json lists them, mesh tiles where the layer may have data.
 bool makes(const Layer& layer, Format f, const ValidTile& tile) {
     if (is_terrain_format(f)) {
-        return in_any(terrain_available(terrain_spec_of(layer), tile.z()), tile.x(), tile.y());
+        return terrain_lists(terrain_spec_of(layer), tile.id());
     }
     return is_dem_format(f) || layer.may_have_tile(tile);
 }
@@ -342,12 +342,12 @@ bool write_terrain_tileset(const Layer& layer, TileStore& store, const std::stri
             ++written;
             // The child subtrees are those whose root tile is available.
             const int child = static_cast<int>(level) + kTerrainSubtreeLevels;
-            const std::vector<TileRange> r = terrain_available(terrain_spec_of(layer), child);
+            const TerrainSpec spec = terrain_spec_of(layer);
             const std::int64_t side = std::int64_t{1} << kTerrainSubtreeLevels;
             const std::int64_t offset = std::int64_t{root} << child;
-            for (std::int64_t j = y * side; !r.empty() && j < (y + 1) * side; ++j) {
+            for (std::int64_t j = y * side; child <= spec.max_zoom && j < (y + 1) * side; ++j) {
                 for (std::int64_t i = x * side; i < (x + 1) * side; ++i) {
-                    if (in_any(r, offset + i, j)) {
+                    if (terrain_lists(spec, TileId{child, offset + i, j})) {
                         todo.push_back({child, i, j});
                     }
                 }
@@ -1093,6 +1093,15 @@ std::optional<Made> make_planned_tile(const BuildOptions& o,
         if (is_dem_format(f) == dem && makes(layer, f, tile)) {
             formats.push_back(f);
         }
+    }
+    if (formats.empty()) {
+        // Beside a file of a collection, within the box around them: nothing to make.
+        ++counters.empty;
+        if (remake) {
+            note_removed(o, made);
+            return made;
+        }
+        return std::nullopt;
     }
     if (check_present && !remake && std::all_of(formats.begin(), formats.end(), [&](Format f) {
             return store.contains(TileKey{o.layer.name, id, f, -1});

@@ -95,12 +95,11 @@ LayerPlan::LayerPlan(const LayerOptions& options, const DemSource& source)
     const DemInfo& info = source_.info();
     footprint_ = source_.footprint();
     for (int z = 0; z <= kMaxZoom; ++z) {
-        footprints_.push_back(source_.footprints_at(options_.scheme, z, options_.tile_size));
         std::vector<TileRange> ranges;
-        for (const LonLatBox& box : footprints_.back()) {
+        for (const LonLatBox& box : source_.footprints_at(options_.scheme, z, options_.tile_size)) {
             ranges.push_back(tiles_in_families(options_.scheme, box, footprint_, z));
         }
-        family_ranges_.push_back(std::move(ranges));
+        covers_.emplace_back(z, ranges);
     }
     pixels_ = source_.pixel_grid(options_.scheme);
     summary_ok_ = pixels_ && summary_serves(*pixels_, options_.scheme);
@@ -229,23 +228,23 @@ LatticeBlock LayerPlan::summary_sample(Scheme scheme,
         sum, *pixels_, datum_, scheme, z, size, level, column0, row0, width, height);
 }
 
-const std::vector<LonLatBox>& LayerPlan::footprints_at(int z) const {
+const TileCover& LayerPlan::cover_at(int z) const {
     TB_ASSERT(z >= 0 && z <= kMaxZoom);
-    return footprints_[static_cast<std::size_t>(z)];
+    return covers_[static_cast<std::size_t>(z)];
 }
 
 TileRange LayerPlan::tiles_at(int z) const {
     if (z < min_zoom_ || z > max_zoom_) {
         return TileRange{z, 0, 0, -1, -1};
     }
-    return bounding(z, family_ranges_[static_cast<std::size_t>(z)]);
+    return cover_at(z).bounding();
 }
 
 std::int64_t LayerPlan::tile_count_at(int z) const {
     if (z < min_zoom_ || z > max_zoom_) {
         return 0;
     }
-    return union_count(family_ranges_[static_cast<std::size_t>(z)]);
+    return cover_at(z).count();
 }
 
 bool LayerPlan::may_have_tile(const ValidTile& tile) const {
@@ -254,7 +253,7 @@ bool LayerPlan::may_have_tile(const ValidTile& tile) const {
 }
 
 bool LayerPlan::in_families(const ValidTile& tile) const {
-    return in_any(family_ranges_[static_cast<std::size_t>(tile.z())], tile.x(), tile.y());
+    return cover_at(tile.z()).contains(tile.x(), tile.y());
 }
 
 void LayerPlan::check_data(const ValidTile& tile) const {

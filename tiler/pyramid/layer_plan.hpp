@@ -30,9 +30,11 @@ public:
     // The first zoom globe terrain is meshed from the data at (filler on the geoid above it).
     int terrain_min_zoom() const { return terrain_min_zoom_; }
     LonLatBox footprint() const { return footprint_; }
-    // Where zoom z has data (DemSource::footprints_at): the footprint, or for a collection the
-    // footprints of the sources that go that deep.
-    const std::vector<LonLatBox>& footprints_at(int z) const;
+    // The tiles of zoom z (0..kMaxZoom) over the data that goes that deep
+    // (DemSource::footprints_at: each file's footprint, or for a collection those of the files
+    // that go that deep), in whole families (tiles_in_families). Zooms outside
+    // min_zoom..max_zoom too: globe terrain lists its filler zooms by them.
+    const TileCover& cover_at(int z) const;
     // The source's pixel grid in the scheme's CRS, if it has one (Layer::guarantee).
     const std::optional<PixelGrid>& pixels() const { return pixels_; }
     VerticalDatum datum() const { return datum_; }
@@ -114,10 +116,7 @@ private:
     mutable std::once_flag reach_once_;
     mutable std::vector<double> reach_;
     LonLatBox footprint_;
-    std::vector<std::vector<LonLatBox>> footprints_; // footprints_at, zooms 0..kMaxZoom
-    // Per zoom, the tiles over each of footprints_at(z) in whole families (tiles_in_families):
-    // those that may hold data (asked per tile).
-    std::vector<std::vector<TileRange>> family_ranges_;
+    std::vector<TileCover> covers_; // cover_at, zooms 0..kMaxZoom
     VerticalDatum datum_ = VerticalDatum::Egm96;
     int min_zoom_ = 0, max_zoom_ = 0;
     int terrain_min_zoom_ = 0;

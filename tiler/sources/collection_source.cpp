@@ -154,8 +154,8 @@ private:
     LonLatBox footprint_;
 };
 
-// The members whose own pyramid reaches zoom z (the first zoom whose lattice is as fine as
-// their pixels, as LayerPlan plans max_zoom), or past the deepest, the deepest ones.
+// The files of the members whose own pyramid reaches zoom z (the first zoom whose lattice is as
+// fine as their pixels, as LayerPlan plans max_zoom), or past the deepest, the deepest ones.
 std::vector<LonLatBox> CollectionSource::footprints_at(Scheme scheme, int z, int size) const {
     std::vector<int> deepest(members_.size(), kMaxZoom);
     for (std::size_t m = 0; m < members_.size(); ++m) {
@@ -170,7 +170,8 @@ std::vector<LonLatBox> CollectionSource::footprints_at(Scheme scheme, int z, int
     std::vector<LonLatBox> out;
     for (std::size_t m = 0; m < members_.size(); ++m) {
         if (deepest[m] >= reach) {
-            out.push_back(members_[m]->footprint());
+            const std::vector<LonLatBox> each = members_[m]->footprints_at(scheme, z, size);
+            out.insert(out.end(), each.begin(), each.end());
         }
     }
     return out;

@@ -97,11 +97,14 @@ private:
 
 class GdalDemSource final : public DemSource {
 public:
-    // `file`, when given, holds open_name (a mosaic's VRT) for as long as the source lives.
+    // `file`, when given, holds open_name (a mosaic's VRT) for as long as the source lives;
+    // `file_bounds` are a mosaic's files' lon/lat outlines (footprints_at).
     GdalDemSource(std::string open_name,
                   DemInfo info,
-                  std::shared_ptr<const MemoryFile> file = nullptr)
-        : file_(std::move(file)), open_name_(std::move(open_name)), info_(std::move(info)) {
+                  std::shared_ptr<const MemoryFile> file = nullptr,
+                  std::vector<LonLatBox> file_bounds = {})
+        : file_(std::move(file)), open_name_(std::move(open_name)), info_(std::move(info)),
+          file_bounds_(std::move(file_bounds)) {
         GDALDatasetUniquePtr ds = open_dataset();
         GDALRasterBand* band = ds->GetRasterBand(1);
         data_type_ = band->GetRasterDataType();
@@ -142,6 +145,23 @@ public:
         return footprint_;
     }
     bool ellipsoidal_heights() const override { return ellipsoidal_; }
+
+    // A mosaic's data lies under its files, not over the whole box around them (scattered
+    // surveys): each file's outline within the footprint.
+    std::vector<LonLatBox> footprints_at(Scheme, int, int) const override {
+        TB_ASSERT(georeferenced_);
+        std::vector<LonLatBox> out;
+        for (const LonLatBox& b : file_bounds_) {
+            const LonLatBox in{std::max(b.west, footprint_.west),
+                               std::max(b.south, footprint_.south),
+                               std::min(b.east, footprint_.east),
+                               std::min(b.north, footprint_.north)};
+            if (in.west <= in.east && in.south <= in.north) {
+                out.push_back(in);
+            }
+        }
+        return out.empty() ? std::vector<LonLatBox>{footprint_} : out;
+    }
 
     double pixels_per_sample(Scheme scheme, int z, int size) const override {
         TB_ASSERT(georeferenced_);
@@ -388,6 +408,7 @@ private:
     std::shared_ptr<const MemoryFile> file_; // first: outlives the handles reading it
     std::string open_name_;
     DemInfo info_;
+    std::vector<LonLatBox> file_bounds_;
     GDALDataType data_type_ = GDT_Unknown;
     OGRSpatialReference srs_;
     bool has_srs_ = false, georeferenced_ = false, ellipsoidal_ = false;
@@ -1010,7 +1031,17 @@ std::shared_ptr<const DemSource> open_mosaic(const std::vector<const FileScan*>&
     info.files = paths;
     check_likely_nodata(info);
     warn_outliers(info);
-    return std::make_shared<GdalDemSource>(file->path(), std::move(info), std::move(file));
+    std::vector<LonLatBox> bounds;
+    for (const FileScan* f : files) {
+        if (const auto& b = f->info.lonlat_bounds) {
+            bounds.push_back({(*b)[0], (*b)[1], (*b)[2], (*b)[3]});
+        } else {
+            bounds.clear(); // one file of unknown extent: the mosaic's box stands for all
+            break;
+        }
+    }
+    return std::make_shared<GdalDemSource>(
+        file->path(), std::move(info), std::move(file), std::move(bounds));
 }
 
 // One group of group_by_grid, its files' heights read once: a file alone (the same from its

@@ -320,10 +320,10 @@ public:
     // About how many full-resolution pixels a tile of zoom z reads at most (pixels_in's window):
     // its side in pixels, clipped to the raster. Requires georeferenced().
     virtual double tile_pixels(Scheme scheme, int z, int size) const = 0;
-    // Where data as fine as zoom z's lattice or finer lies: the footprint, or for a collection
-    // the footprints of the members that go that deep, each on its own (the pyramid goes as deep
-    // as the finest source under each region, and no deeper elsewhere: not over the land between
-    // two surveys). Requires georeferenced().
+    // Where data as fine as zoom z's lattice or finer lies: the footprint, a mosaic's files'
+    // footprints, or for a collection those of the members that go that deep, each file on its
+    // own (the pyramid goes as deep as the finest source under each region, and no deeper
+    // elsewhere: not over the land between two surveys). Requires georeferenced().
     virtual std::vector<LonLatBox> footprints_at(Scheme, int /*z*/, int /*size*/) const {
         return {footprint()};
     }
