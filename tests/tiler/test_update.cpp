@@ -263,18 +263,55 @@ TEST_CASE("an update after which two grids swap rank (a file of one listed befor
         {w2, a, w1}, out, dir.file("fresh"), build(options({w2, a, w1}, out), true), false);
 }
 
+namespace {
+
+// The layer the tests' builds make of `dems` (32-sample tiles, no summaries).
+std::shared_ptr<const Layer> open_layer(const std::vector<std::string>& dems) {
+    LayerOptions o;
+    o.sources = dems;
+    o.tile_size = 32;
+    o.summary_dir = "off";
+    return Layer::open(o);
+}
+
+// Whether the layer may have a tile of zoom z at (lon, lat).
+bool may_have_at(const Layer& layer, int z, double lon, double lat) {
+    const TileRange r =
+        tiles_covering(Scheme::Geodetic, {lon - 1e-9, lat - 1e-9, lon + 1e-9, lat + 1e-9}, z);
+    return layer.may_have_tile(layer.tile({z, r.x0, r.y0}));
+}
+
+// How many tiles of zoom z the layer may have, counted one by one over tiles_at(z).
+std::int64_t may_have_count(const Layer& layer, int z) {
+    const TileRange all = layer.tiles_at(z);
+    std::int64_t tiles = 0;
+    for (std::int64_t y = all.y0; y <= all.y1; ++y) {
+        for (std::int64_t x = all.x0; x <= all.x1; ++x) {
+            tiles += layer.may_have_tile(layer.tile({z, x, y})) ? 1 : 0;
+        }
+    }
+    return tiles;
+}
+
+// How many tiles one zoom of layer.json's "available" lists, overlaps counted twice.
+std::int64_t listed_count(const nlohmann::json& zoom) {
+    std::int64_t listed = 0;
+    for (const auto& r : zoom) {
+        listed += (r["endX"].get<std::int64_t>() - r["startX"].get<std::int64_t>() + 1) *
+                  (r["endY"].get<std::int64_t>() - r["startY"].get<std::int64_t>() + 1);
+    }
+    return listed;
+}
+
+} // namespace
+
 TEST_CASE("depth follows each DEM: the zooms only two far-apart blocks reach have tiles over "
           "each block, none over the land between them") {
     ScratchDir dir;
     const std::string a = cell_a(dir), c = finer_block_c(dir);
     const std::string f = write_dem(dir.file("f.tif"), 8.55, 46.9, 81, 81, 0.02 / 80, 6);
-    LayerOptions o;
-    o.sources = {a, c, f};
-    o.tile_size = 32;
-    o.summary_dir = "off";
-    const auto layer = Layer::open(o);
-    o.sources = {a};
-    const int cell_deepest = Layer::open(o)->max_zoom();
+    const auto layer = open_layer({a, c, f});
+    const int cell_deepest = open_layer({a})->max_zoom();
     const LonLatBox cb = DemSource::open({c})->footprint(), fb = DemSource::open({f})->footprint();
     const double mid_lon = (cb.east + fb.west) / 2, mid_lat = (cb.north + fb.south) / 2;
     std::string layer_json;
@@ -284,11 +321,7 @@ TEST_CASE("depth follows each DEM: the zooms only two far-apart blocks reach hav
     int both_zooms = 0; // zooms deeper than a's with tiles over c and f
     for (int z = cell_deepest + 1; z <= layer->max_zoom(); ++z) {
         CAPTURE(z);
-        const auto over = [&](double lon, double lat) {
-            const TileRange r = tiles_covering(
-                Scheme::Geodetic, {lon - 1e-9, lat - 1e-9, lon + 1e-9, lat + 1e-9}, z);
-            return layer->may_have_tile(layer->tile({z, r.x0, r.y0}));
-        };
+        const auto over = [&](double lon, double lat) { return may_have_at(*layer, z, lon, lat); };
         // f goes deeper than c: c's tiles stop at its own deepest zoom, f's go on; while both
         // have tiles, none lies between them.
         CHECK(over((fb.west + fb.east) / 2, (fb.south + fb.north) / 2));
@@ -296,12 +329,7 @@ TEST_CASE("depth follows each DEM: the zooms only two far-apart blocks reach hav
         both_zooms += both ? 1 : 0;
         CHECK_FALSE(over(mid_lon, mid_lat));
         const TileRange all = layer->tiles_at(z);
-        std::int64_t tiles = 0;
-        for (std::int64_t y = all.y0; y <= all.y1; ++y) {
-            for (std::int64_t x = all.x0; x <= all.x1; ++x) {
-                tiles += layer->may_have_tile(layer->tile({z, x, y})) ? 1 : 0;
-            }
-        }
+        const std::int64_t tiles = may_have_count(*layer, z);
         // No more than the blocks' own families (each block's tiles, widened by one each way).
         const auto families = [&](const LonLatBox& b) {
             const TileRange r = tiles_covering(Scheme::Geodetic, b, z);
@@ -311,11 +339,7 @@ TEST_CASE("depth follows each DEM: the zooms only two far-apart blocks reach hav
         CHECK(layer->tile_count_at(z) == tiles); // what info prints
         CHECK((tiles < all.count() || !both));
         // layer.json lists the same tiles, range by range.
-        std::int64_t listed = 0;
-        for (const auto& r : available[static_cast<std::size_t>(z)]) {
-            listed += (r["endX"].get<std::int64_t>() - r["startX"].get<std::int64_t>() + 1) *
-                      (r["endY"].get<std::int64_t>() - r["startY"].get<std::int64_t>() + 1);
-        }
+        const std::int64_t listed = listed_count(available[static_cast<std::size_t>(z)]);
         CHECK(listed >= tiles);
         CHECK((listed < all.count() || !both));
     }
@@ -331,13 +355,8 @@ TEST_CASE("depth follows each file of one grid: far-apart blocks of one survey g
     const std::string a = cell_a(dir), c = finer_block_c(dir);
     const std::string c2 = write_dem(dir.file("c2.tif"), 8.6, 46.9, 97, 97, step, 3);
     const std::string c3 = write_dem(dir.file("c3.tif"), 8.6, 46.5, 97, 97, step, 4);
-    LayerOptions o;
-    o.sources = {a, c, c2};
-    o.tile_size = 32;
-    o.summary_dir = "off";
-    const auto layer = Layer::open(o);
-    o.sources = {a};
-    const int cell_deepest = Layer::open(o)->max_zoom();
+    const auto layer = open_layer({a, c, c2});
+    const int cell_deepest = open_layer({a})->max_zoom();
     REQUIRE(layer->source().members().size() == 2); // a, and the mosaic of c and c2
     const LonLatBox cb = DemSource::open({c})->footprint(),
                     c2b = DemSource::open({c2})->footprint();
@@ -347,30 +366,17 @@ TEST_CASE("depth follows each file of one grid: far-apart blocks of one survey g
     REQUIRE(layer->max_zoom() > cell_deepest);
     for (int z = cell_deepest + 1; z <= layer->max_zoom(); ++z) {
         CAPTURE(z);
-        const auto over = [&](double lon, double lat) {
-            const TileRange r = tiles_covering(
-                Scheme::Geodetic, {lon - 1e-9, lat - 1e-9, lon + 1e-9, lat + 1e-9}, z);
-            return layer->may_have_tile(layer->tile({z, r.x0, r.y0}));
-        };
+        const auto over = [&](double lon, double lat) { return may_have_at(*layer, z, lon, lat); };
         CHECK(over((cb.west + cb.east) / 2, (cb.south + cb.north) / 2));
         CHECK(over((c2b.west + c2b.east) / 2, (c2b.south + c2b.north) / 2));
         CHECK_FALSE(over((cb.east + c2b.west) / 2, (cb.north + c2b.south) / 2)); // between
         CHECK_FALSE(over((c2b.west + c2b.east) / 2, (cb.south + cb.north) / 2)); // c3's corner
         const TileRange all = layer->tiles_at(z);
-        std::int64_t tiles = 0;
-        for (std::int64_t y = all.y0; y <= all.y1; ++y) {
-            for (std::int64_t x = all.x0; x <= all.x1; ++x) {
-                tiles += layer->may_have_tile(layer->tile({z, x, y})) ? 1 : 0;
-            }
-        }
+        const std::int64_t tiles = may_have_count(*layer, z);
         CHECK(layer->tile_count_at(z) == tiles);
         CHECK(tiles < all.count());
         // layer.json lists exactly those tiles, in rectangles that do not overlap.
-        std::int64_t listed = 0;
-        for (const auto& r : available[static_cast<std::size_t>(z)]) {
-            listed += (r["endX"].get<std::int64_t>() - r["startX"].get<std::int64_t>() + 1) *
-                      (r["endY"].get<std::int64_t>() - r["startY"].get<std::int64_t>() + 1);
-        }
+        const std::int64_t listed = listed_count(available[static_cast<std::size_t>(z)]);
         CHECK(listed == tiles);
     }
     const std::string out = dir.file("out");
