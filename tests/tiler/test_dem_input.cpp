@@ -580,3 +580,38 @@ TEST_CASE("inspect_metadata says what inspect_dem says of a file, without its he
     CHECK(meta.lonlat_bounds == full.lonlat_bounds);
     CHECK(meta.resolution_m == full.resolution_m);
 }
+
+TEST_CASE("files of one mosaic that overlap and differ by more than eps there get a warning "
+          "naming both and which wins; files that agree, or only touch, get none") {
+    ScratchDir dir;
+    // a: hills on a 129 x 129 grid; b: the same grid's pixels from column 96 on, overlapping
+    // a's last 33 columns; c: the columns after a's, touching it.
+    const Fixture a = hills(129);
+    const auto part = [&](int from, double add) {
+        Fixture f = a;
+        f.width = 129 - from + 64;
+        f.values.clear();
+        for (int y = 0; y < 129; ++y) {
+            for (int x = from; x < from + f.width; ++x) {
+                f.values.push_back(x < 129 ? a.values[y * 129 + x] + add : 500.0);
+            }
+        }
+        (*f.geotransform)[0] = (*a.geotransform)[0] + from * (*a.geotransform)[1];
+        return f;
+    };
+    const std::string pa = tb_test::write_fixture(dir.file("a.tif"), a);
+    const std::string agree = tb_test::write_fixture(dir.file("agree.tif"), part(96, 0));
+    const std::string differ = tb_test::write_fixture(dir.file("differ.tif"), part(96, 40));
+    const std::string touch = tb_test::write_fixture(dir.file("touch.tif"), part(129, 40));
+    const Run same = run(dir, "info " + pa + " " + agree + " " + touch);
+    REQUIRE_MESSAGE(same.code == 0, same.err);
+    CHECK(same.err.find("overlap") == std::string::npos);
+    const Run other = run(dir, "info " + differ + " " + pa);
+    REQUIRE_MESSAGE(other.code == 0, other.err);
+    CHECK(other.err.find("Z warn ") != std::string::npos);
+    CHECK(other.err.find(differ + " and " + pa +
+                         " overlap (4257 pixels valid in both) and "
+                         "differ there by up to 40 m") != std::string::npos);
+    CHECK(other.err.find(differ + " wins where both have data, being given first") !=
+          std::string::npos);
+}

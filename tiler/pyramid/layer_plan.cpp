@@ -13,6 +13,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <functional>
 #include <string>
 
 namespace tb::tiler {
@@ -88,6 +90,61 @@ constexpr double kTerrainCoarseShare = 0.5;
 // The largest share of eps globe terrain keeps for sag (terrain_budget_at).
 constexpr double kTerrainSagMost = 0.75;
 
+// v with 4 significant digits, for a message.
+std::string short_number(double v) {
+    char text[32];
+    std::snprintf(text, sizeof text, "%.4g", v);
+    return text;
+}
+
+// At most this many overlapping pairs are named, one warning each; a last one counts the rest.
+constexpr std::size_t kOverlapWarnings = 5;
+
+// Warns of files of one mosaic that overlap and differ there by more than the ladder's eps at
+// their own deepest zoom (`ladder_at`): the tiles show the one given first, which may not be
+// what the user meant.
+void warn_overlaps(const DemSource& source,
+                   const LayerOptions& options,
+                   int max_zoom,
+                   const std::function<double(int)>& ladder_at) {
+    std::vector<const DemSource*> groups;
+    for (const auto& m : source.members()) {
+        groups.push_back(m.get());
+    }
+    if (groups.empty()) {
+        groups.push_back(&source);
+    }
+    std::size_t named = 0, more = 0;
+    for (const DemSource* g : groups) {
+        int deepest = max_zoom;
+        while (deepest > 0 &&
+               g->pixels_per_sample(options.scheme, deepest - 1, options.tile_size) <= 1.0) {
+            --deepest;
+        }
+        const double eps = ladder_at(deepest);
+        for (const FileOverlap& o : g->overlaps()) {
+            if (o.max_diff <= eps) {
+                continue;
+            }
+            if (named++ >= kOverlapWarnings) {
+                ++more;
+                continue;
+            }
+            log::warn(o.first + " and " + o.second + " overlap (" + std::to_string(o.pixels) +
+                      " pixels valid in both) and differ there by up to " +
+                      short_number(o.max_diff) + " m, more than the eps of their finest zoom (" +
+                      short_number(eps) + " m at zoom " + std::to_string(deepest) +
+                      "): " + o.first +
+                      " wins where both have data, being given first; give the one that "
+                      "should win first, or cut the other");
+        }
+    }
+    if (more > 0) {
+        log::warn(std::to_string(more) + " more pair(s) of overlapping DEM files differ by more "
+                                         "than eps; the file given first wins in each");
+    }
+}
+
 } // namespace
 
 LayerPlan::LayerPlan(const LayerOptions& options, const DemSource& source)
@@ -120,6 +177,9 @@ LayerPlan::LayerPlan(const LayerOptions& options, const DemSource& source)
                       ? *options_.finest_eps
                       : std::max({kMinEps, std::ldexp(zero_eps, -max_zoom_), height_step(info)});
     compute_height_range();
+    warn_overlaps(source_, options_, max_zoom_, [this](int z) {
+        return finest_eps_ * std::ldexp(1.0, max_zoom_ - z);
+    });
 }
 
 // The ladder, finest_eps * 2^(max_zoom - z), raised where the summary shows a zoom's cells

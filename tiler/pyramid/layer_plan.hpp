@@ -99,7 +99,7 @@ public:
     void prepare() const;
 
 private:
-    // Whether the tile lies over one of footprints_at(its zoom), in whole families.
+    // Whether the tile lies in cover_at(its zoom).
     bool in_families(const ValidTile& tile) const;
     void plan_zooms();
     double tile_pixels(int z) const;

@@ -94,6 +94,14 @@ public:
         return out;
     }
     std::vector<std::shared_ptr<const DemSource>> members() const override { return members_; }
+    std::vector<FileOverlap> overlaps() const override {
+        std::vector<FileOverlap> out;
+        for (const auto& m : members_) {
+            const std::vector<FileOverlap> each = m->overlaps();
+            out.insert(out.end(), each.begin(), each.end());
+        }
+        return out;
+    }
     bool georeferenced() const override { return true; }
     LonLatBox footprint() const override { return footprint_; }
     bool ellipsoidal_heights() const override { return members_.front()->ellipsoidal_heights(); }

@@ -7,6 +7,7 @@
 #include "tiler/log.hpp"
 #include "tiler/sources/collection_source.hpp"
 #include "tiler/sources/gdal_source.hpp"
+#include "tiler/sources/mosaic_overlaps.hpp"
 #include "tiler/sources/mosaic_vrt.hpp"
 #include "tiler/sources/source_list.hpp"
 
@@ -102,9 +103,10 @@ public:
     GdalDemSource(std::string open_name,
                   DemInfo info,
                   std::shared_ptr<const MemoryFile> file = nullptr,
-                  std::vector<LonLatBox> file_bounds = {})
+                  std::vector<LonLatBox> file_bounds = {},
+                  std::vector<FileOverlap> overlaps = {})
         : file_(std::move(file)), open_name_(std::move(open_name)), info_(std::move(info)),
-          file_bounds_(std::move(file_bounds)) {
+          file_bounds_(std::move(file_bounds)), overlaps_(std::move(overlaps)) {
         GDALDatasetUniquePtr ds = open_dataset();
         GDALRasterBand* band = ds->GetRasterBand(1);
         data_type_ = band->GetRasterDataType();
@@ -145,6 +147,7 @@ public:
         return footprint_;
     }
     bool ellipsoidal_heights() const override { return ellipsoidal_; }
+    std::vector<FileOverlap> overlaps() const override { return overlaps_; }
 
     // A mosaic's data lies under its files, not over the whole box around them (scattered
     // surveys): each file's outline within the footprint.
@@ -409,6 +412,7 @@ private:
     std::string open_name_;
     DemInfo info_;
     std::vector<LonLatBox> file_bounds_;
+    std::vector<FileOverlap> overlaps_;
     GDALDataType data_type_ = GDT_Unknown;
     OGRSpatialReference srs_;
     bool has_srs_ = false, georeferenced_ = false, ellipsoidal_ = false;
@@ -1041,7 +1045,7 @@ std::shared_ptr<const DemSource> open_mosaic(const std::vector<const FileScan*>&
         }
     }
     return std::make_shared<GdalDemSource>(
-        file->path(), std::move(info), std::move(file), std::move(bounds));
+        file->path(), std::move(info), std::move(file), std::move(bounds), measure_overlaps(files));
 }
 
 // One group of group_by_grid, its files' heights read once: a file alone (the same from its

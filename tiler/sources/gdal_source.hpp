@@ -132,6 +132,14 @@ struct BandStats {
     double outlier_height = 0;
 };
 
+// Two files of one mosaic whose pixels overlap: `first` (given first) wins there. pixels: those
+// valid in both that were compared; max_diff: the largest height difference among them (m).
+struct FileOverlap {
+    std::string first, second;
+    std::int64_t pixels = 0;
+    double max_diff = 0;
+};
+
 // One file of several, opened once: what inspect_metadata says of it, band 1's block size and
 // overviews, its CRS (null without one), and, when `scanned`, every sample's statistics, to merge
 // into its mosaic's (describe_mosaic). Band 1 is checked to hold heights, as DemSource::open does.
@@ -327,6 +335,9 @@ public:
     virtual std::vector<LonLatBox> footprints_at(Scheme, int /*z*/, int /*size*/) const {
         return {footprint()};
     }
+    // Overlapping files of a mosaic and how far they differ (measure_overlaps); none for one
+    // file. A collection's are its members'.
+    virtual std::vector<FileOverlap> overlaps() const { return {}; }
     // The DEMs it reads: itself, or each member of a collection (collection_source.hpp).
     virtual std::vector<const DemInfo*> parts() const { return {&info()}; }
     // A collection's members, ranked (the first wins where they overlap); empty for one DEM or
