@@ -305,6 +305,32 @@ TileRange TileCover::bounding() const {
     return tiler::bounding(z_, ranges());
 }
 
+std::vector<TileRange> TileCover::ranges_within(const TileRange& window) const {
+    std::vector<TileRange> out;
+    if (window.empty()) {
+        return out;
+    }
+    // Bands are apart and sorted, so their last rows are sorted too; so are a band's spans.
+    auto band = std::lower_bound(bands_.begin(),
+                                 bands_.end(),
+                                 window.y0,
+                                 [](const Band& b, std::int64_t y) { return b.y1 < y; });
+    for (; band != bands_.end() && band->y0 <= window.y1; ++band) {
+        auto span = std::lower_bound(band->spans.begin(),
+                                     band->spans.end(),
+                                     window.x0,
+                                     [](const auto& s, std::int64_t x) { return s.second < x; });
+        for (; span != band->spans.end() && span->first <= window.x1; ++span) {
+            out.push_back(TileRange{z_,
+                                    std::max(span->first, window.x0),
+                                    std::max(band->y0, window.y0),
+                                    std::min(span->second, window.x1),
+                                    std::min(band->y1, window.y1)});
+        }
+    }
+    return out;
+}
+
 std::vector<TileRange> TileCover::ranges() const {
     std::vector<TileRange> out;
     for (const Band& b : bands_) {

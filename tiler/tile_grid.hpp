@@ -60,6 +60,9 @@ public:
     TileRange bounding() const;
     // The disjoint rectangles, by band from the first row, then by column.
     std::vector<TileRange> ranges() const;
+    // Those rectangles cut to `window` (of this zoom), found by binary search: a tile's
+    // descendants without a walk over the whole zoom.
+    std::vector<TileRange> ranges_within(const TileRange& window) const;
 
 private:
     struct Band {

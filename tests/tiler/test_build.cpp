@@ -320,6 +320,36 @@ TEST_CASE("build writes every tile its tileset lists, each decodable, and the sa
     CHECK(db->get_document("terrain", "tileset.json") == slurp(layer / "tileset.json"));
 }
 
+TEST_CASE("a mercator build asked for every format makes its mesh and raster DEM tiles, no globe "
+          "terrain (geodetic only), and fails no tile") {
+    BuildDir dir;
+    const auto dem = write_dem(dir / "dem.tif");
+    const Run a = run(args(dem,
+                           dir / "out",
+                           {"--threads",
+                            "2",
+                            "--scheme",
+                            "mercator",
+                            "--formats",
+                            "glb,drc,terrain,terrain3d,terrarium",
+                            "--json"}),
+                      dir);
+    INFO(a.err);
+    REQUIRE(a.code == 0);
+    CHECK(a.out.find("\"failed\":0") != std::string::npos);
+    const fs::path layer = dir.path / "out/terrain";
+    const auto listed = tileset_tiles(layer);
+    REQUIRE(listed.size() > 5);
+    std::size_t terrain = 0, png = 0;
+    for (const auto& e : fs::recursive_directory_iterator(layer)) {
+        terrain += e.path().extension() == ".terrain" ? 1 : 0;
+        png += e.path().extension() == ".png" ? 1 : 0;
+    }
+    CHECK(terrain == 0);
+    CHECK(png > 0);
+    CHECK_FALSE(fs::exists(layer / "layer.json"));
+}
+
 TEST_CASE("a build killed half way and resumed equals one clean run, byte for byte") {
     BuildDir dir;
     const auto dem = write_dem(dir / "dem.tif");

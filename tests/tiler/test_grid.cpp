@@ -299,6 +299,22 @@ TEST_CASE("a tile cover holds exactly the union of its ranges, as disjoint recta
             listed += r.count();
         }
         CHECK(listed == cover.count());
+        // Cut to a window: exactly the union's tiles inside it, once each.
+        const TileRange window{5, at(rng), at(rng), at(rng) + 8, at(rng) + 8};
+        std::set<std::pair<std::int64_t, std::int64_t>> within;
+        for (const TileRange& r : cover.ranges_within(window)) {
+            for (std::int64_t y = r.y0; y <= r.y1; ++y) {
+                for (std::int64_t x = r.x0; x <= r.x1; ++x) {
+                    CHECK(within.insert({x, y}).second);
+                }
+            }
+        }
+        std::size_t inside = 0;
+        for (const auto& [x, y] : truth) {
+            inside += window.contains(x, y) ? 1 : 0;
+            CHECK(within.count({x, y}) == (window.contains(x, y) ? 1u : 0u));
+        }
+        CHECK(within.size() == inside);
         const TileRange box = cover.bounding(), want = bounding(5, ranges);
         CHECK((box.x0 == want.x0 && box.y0 == want.y0 && box.x1 == want.x1 && box.y1 == want.y1));
     }

@@ -1040,11 +1040,18 @@ std::string terrain_metadata(const TerrainSpec& spec, const TileId& id, double e
     std::string out = "{\"available\":[";
     for (int k = 1; k <= kMetadataLevels && id.z + k <= kMaxZoom; ++k) {
         const int z = id.z + k;
-        std::vector<TileRange> under = terrain_available(spec, z);
         const std::int64_t scale = std::int64_t{1} << k;
-        for (TileRange& r : under) {
-            r.x0 = std::max(r.x0, id.x * scale), r.x1 = std::min(r.x1, id.x * scale + scale - 1);
-            r.y0 = std::max(r.y0, id.y * scale), r.y1 = std::min(r.y1, id.y * scale + scale - 1);
+        const TileRange window{
+            z, id.x * scale, id.y * scale, id.x * scale + scale - 1, id.y * scale + scale - 1};
+        std::vector<TileRange> under;
+        if (spec.available_at && z <= spec.max_zoom) {
+            under = spec.available_at(z).ranges_within(window);
+        } else {
+            for (TileRange r : terrain_available(spec, z)) {
+                r.x0 = std::max(r.x0, window.x0), r.x1 = std::min(r.x1, window.x1);
+                r.y0 = std::max(r.y0, window.y0), r.y1 = std::min(r.y1, window.y1);
+                under.push_back(r);
+            }
         }
         // Listed as the tiles under this one alone make them: data far away, which splits the
         // zoom's rectangles elsewhere, leaves this tile's bytes as they are (build --update).

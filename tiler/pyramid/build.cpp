@@ -234,7 +234,9 @@ TerrainSpec terrain_spec_of(const Layer& layer) {
 // layer.json lists them, mesh tiles where the layer may have data.
 bool makes(const Layer& layer, Format f, const ValidTile& tile) {
     if (is_terrain_format(f)) {
-        return terrain_lists(terrain_spec_of(layer), tile.id());
+        // Globe terrain is geodetic: a layer of another scheme makes none (nor its tileset).
+        return layer.options().scheme == Scheme::Geodetic &&
+               terrain_lists(terrain_spec_of(layer), tile.id());
     }
     return is_dem_format(f) || layer.may_have_tile(tile);
 }

@@ -1038,7 +1038,11 @@ std::shared_ptr<const DemSource> open_mosaic(const std::vector<const FileScan*>&
     std::vector<LonLatBox> bounds;
     for (const FileScan* f : files) {
         if (const auto& b = f->info.lonlat_bounds) {
-            bounds.push_back({(*b)[0], (*b)[1], (*b)[2], (*b)[3]});
+            // Its pixel edges, brought in by half a pixel: through its outer pixel centres, as a
+            // single file's footprint is.
+            const double dx = ((*b)[2] - (*b)[0]) / std::max(1, f->info.width) / 2;
+            const double dy = ((*b)[3] - (*b)[1]) / std::max(1, f->info.height) / 2;
+            bounds.push_back({(*b)[0] + dx, (*b)[1] + dy, (*b)[2] - dx, (*b)[3] - dy});
         } else {
             bounds.clear(); // one file of unknown extent: the mosaic's box stands for all
             break;
