@@ -109,13 +109,7 @@ DemTilePlan dem_tile_plan(const Layer& layer) {
     plan.bounds.south = std::max(plan.bounds.south, -kMercatorLat);
     plan.bounds.north = std::min(plan.bounds.north, kMercatorLat);
     const DemSource& source = layer.source();
-    plan.max_zoom = kMaxZoom;
-    for (int z = 0; z <= kMaxZoom; ++z) {
-        if (source.pixels_per_sample(Scheme::Mercator, z, plan.tile_size) <= 1.0 + 1e-9) {
-            plan.max_zoom = z;
-            break;
-        }
-    }
+    plan.max_zoom = native_zoom(source, Scheme::Mercator, plan.tile_size);
     // From zoom 0: MapLibre and deck.gl draw no terrain below a raster-dem source's minzoom.
     // Coarse zooms read the layer's summary where it has one (Layer::sample).
     plan.min_zoom = 0;

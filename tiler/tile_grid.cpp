@@ -347,8 +347,17 @@ TileRange tiles_in_families(Scheme scheme, const LonLatBox& deep, const LonLatBo
         return r;
     }
     const TileRange cut = tiles_covering(scheme, all, z);
-    r.x0 = std::max(r.x0 & ~std::int64_t{1}, cut.x0), r.x1 = std::min(r.x1 | 1, cut.x1);
-    r.y0 = std::max(r.y0 & ~std::int64_t{1}, cut.y0), r.y1 = std::min(r.y1 | 1, cut.y1);
+    r = whole_families(r);
+    r.x0 = std::max(r.x0, cut.x0), r.x1 = std::min(r.x1, cut.x1);
+    r.y0 = std::max(r.y0, cut.y0), r.y1 = std::min(r.y1, cut.y1);
+    return r;
+}
+
+TileRange whole_families(TileRange r) {
+    if (r.z > 0 && !r.empty()) {
+        r.x0 &= ~std::int64_t{1}, r.y0 &= ~std::int64_t{1};
+        r.x1 |= 1, r.y1 |= 1;
+    }
     return r;
 }
 

@@ -53,7 +53,6 @@ public:
     TileCover() = default;
     TileCover(int z, const std::vector<TileRange>& ranges);
 
-    int z() const { return z_; }
     bool empty() const { return bands_.empty(); }
     bool contains(std::int64_t x, std::int64_t y) const;
     std::int64_t count() const;
@@ -135,5 +134,7 @@ TileRange tiles_covering(Scheme scheme, const LonLatBox& box, int z);
 // never loses the part of it that no deep data covers. For z = 0, or `deep` = `all`, the tiles
 // over `deep`.
 TileRange tiles_in_families(Scheme scheme, const LonLatBox& deep, const LonLatBox& all, int z);
+// r widened to whole families (even first, odd last index); r itself at z = 0 or when empty.
+TileRange whole_families(TileRange r);
 
 } // namespace tb::tiler

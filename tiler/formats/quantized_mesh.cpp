@@ -1043,16 +1043,10 @@ std::string terrain_metadata(const TerrainSpec& spec, const TileId& id, double e
         const std::int64_t scale = std::int64_t{1} << k;
         const TileRange window{
             z, id.x * scale, id.y * scale, id.x * scale + scale - 1, id.y * scale + scale - 1};
-        std::vector<TileRange> under;
-        if (spec.available_at && z <= spec.max_zoom) {
-            under = spec.available_at(z).ranges_within(window);
-        } else {
-            for (TileRange r : terrain_available(spec, z)) {
-                r.x0 = std::max(r.x0, window.x0), r.x1 = std::min(r.x1, window.x1);
-                r.y0 = std::max(r.y0, window.y0), r.y1 = std::min(r.y1, window.y1);
-                under.push_back(r);
-            }
-        }
+        const std::vector<TileRange> under =
+            spec.available_at && z <= spec.max_zoom
+                ? spec.available_at(z).ranges_within(window)
+                : TileCover(z, terrain_available(spec, z)).ranges_within(window);
         // Listed as the tiles under this one alone make them: data far away, which splits the
         // zoom's rectangles elsewhere, leaves this tile's bytes as they are (build --update).
         out +=

@@ -14,7 +14,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <functional>
 #include <string>
 
 namespace tb::tiler {
@@ -100,13 +99,13 @@ std::string short_number(double v) {
 // At most this many overlapping pairs are named, one warning each; a last one counts the rest.
 constexpr std::size_t kOverlapWarnings = 5;
 
-// Warns of files of one mosaic that overlap and differ there by more than the ladder's eps at
-// their own deepest zoom (`ladder_at`): the tiles show the one given first, which may not be
-// what the user meant.
+// Warns of files of one mosaic that overlap and differ there by more than the ladder's eps
+// (finest_eps at max_zoom, doubling up) at their own deepest zoom: the tiles show the one given
+// first, which may not be what the user meant.
 void warn_overlaps(const DemSource& source,
                    const LayerOptions& options,
                    int max_zoom,
-                   const std::function<double(int)>& ladder_at) {
+                   double finest_eps) {
     std::vector<const DemSource*> groups;
     for (const auto& m : source.members()) {
         groups.push_back(m.get());
@@ -116,12 +115,8 @@ void warn_overlaps(const DemSource& source,
     }
     std::size_t named = 0, more = 0;
     for (const DemSource* g : groups) {
-        int deepest = max_zoom;
-        while (deepest > 0 &&
-               g->pixels_per_sample(options.scheme, deepest - 1, options.tile_size) <= 1.0) {
-            --deepest;
-        }
-        const double eps = ladder_at(deepest);
+        const int deepest = std::min(max_zoom, native_zoom(*g, options.scheme, options.tile_size));
+        const double eps = finest_eps * std::ldexp(1.0, max_zoom - deepest);
         for (const FileOverlap& o : g->overlaps()) {
             if (o.max_diff <= eps) {
                 continue;
@@ -177,9 +172,7 @@ LayerPlan::LayerPlan(const LayerOptions& options, const DemSource& source)
                       ? *options_.finest_eps
                       : std::max({kMinEps, std::ldexp(zero_eps, -max_zoom_), height_step(info)});
     compute_height_range();
-    warn_overlaps(source_, options_, max_zoom_, [this](int z) {
-        return finest_eps_ * std::ldexp(1.0, max_zoom_ - z);
-    });
+    warn_overlaps(source_, options_, max_zoom_, finest_eps_);
 }
 
 // The ladder, finest_eps * 2^(max_zoom - z), raised where the summary shows a zoom's cells
@@ -390,13 +383,7 @@ const DemSummary& LayerPlan::summary() const {
 // max_zoom: the first zoom whose lattice spacing reaches the source's pixel size.
 // min_zoom: the deepest zoom at which the data still spans at most 2 x 2 tiles.
 void LayerPlan::plan_zooms() {
-    int max_z = kMaxZoom;
-    for (int z = 0; z <= kMaxZoom; ++z) {
-        if (source_.pixels_per_sample(options_.scheme, z, options_.tile_size) <= 1.0 + 1e-9) {
-            max_z = z;
-            break;
-        }
-    }
+    int max_z = native_zoom(source_, options_.scheme, options_.tile_size);
     if (options_.max_zoom) {
         max_z = *options_.max_zoom;
     }

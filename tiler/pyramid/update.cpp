@@ -560,12 +560,7 @@ UpdateTiles::UpdateTiles(const UpdateScope& scope,
             // Widened to whole families: whether a tile exists below a coarser DEM's zoom
             // follows its family (LayerPlan::cover_at), so a file added or removed adds or
             // removes the siblings of the tiles under it too.
-            TileRange r = tiles_reading(scheme, box, z, around);
-            if (z > 0 && !r.empty()) {
-                r.x0 &= ~std::int64_t{1}, r.y0 &= ~std::int64_t{1};
-                r.x1 |= 1, r.y1 |= 1;
-            }
-            here.push_back(clipped(r, span));
+            here.push_back(clipped(whole_families(tiles_reading(scheme, box, z, around)), span));
         }
         carried.clear();
         for (const TileRange& r : own) {

@@ -165,14 +165,9 @@ private:
 // The files of the members whose own pyramid reaches zoom z (the first zoom whose lattice is as
 // fine as their pixels, as LayerPlan plans max_zoom), or past the deepest, the deepest ones.
 std::vector<LonLatBox> CollectionSource::footprints_at(Scheme scheme, int z, int size) const {
-    std::vector<int> deepest(members_.size(), kMaxZoom);
-    for (std::size_t m = 0; m < members_.size(); ++m) {
-        for (int k = 0; k <= kMaxZoom; ++k) {
-            if (members_[m]->pixels_per_sample(scheme, k, size) <= 1.0 + 1e-9) {
-                deepest[m] = k;
-                break;
-            }
-        }
+    std::vector<int> deepest;
+    for (const auto& m : members_) {
+        deepest.push_back(native_zoom(*m, scheme, size));
     }
     const int reach = std::min(z, *std::max_element(deepest.begin(), deepest.end()));
     std::vector<LonLatBox> out;

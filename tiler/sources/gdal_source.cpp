@@ -514,4 +514,13 @@ inspect_metadata(const std::string& path, std::optional<double> nodata, const Va
     return open_described(path, nodata, range).info;
 }
 
+int native_zoom(const DemSource& source, Scheme scheme, int size) {
+    for (int z = 0; z <= kMaxZoom; ++z) {
+        if (source.pixels_per_sample(scheme, z, size) <= 1.0 + 1e-9) {
+            return z;
+        }
+    }
+    return kMaxZoom;
+}
+
 } // namespace tb::tiler

@@ -350,6 +350,10 @@ public:
     virtual core::HeightGrid read_all() const = 0;
 };
 
+// The source's own deepest zoom: the first whose lattice (tiles of `size` samples) is as fine as
+// its pixels, or kMaxZoom when none is.
+int native_zoom(const DemSource& source, Scheme scheme, int size);
+
 // A function giving what DemSource::sample gives (a collection's zoom read through its members'
 // summaries, say).
 using LatticeSampler = std::function<LatticeBlock(Scheme scheme,
