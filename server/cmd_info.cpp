@@ -182,8 +182,9 @@ std::string describe_pyramid(const tiler::LayerOptions& options) {
                      "judged against every valid pixel under them, one by one or as blocks of "
                      "the DEM's summary, and publish the larger of eps and what that measures"
                    : "measured: tiles are meshed on each zoom's lattice in the scheme's CRS and "
-                     "checked at every valid source pixel centre (reprojected); a tile whose "
-                     "measured error exceeds eps publishes the larger bound")
+                     "checked at every valid source pixel centre (reprojected), or at coarse "
+                     "zooms against the blocks of the DEM's summary carried through its CRS; a "
+                     "tile whose measured error exceeds eps publishes the larger bound")
         << "\n";
     out << "    zoom  tiles       columns x rows      eps (m)     reads\n";
     for (int z = layer->min_zoom(); z <= layer->max_zoom(); ++z) {

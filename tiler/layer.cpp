@@ -380,9 +380,8 @@ public:
     // summaries it read, and every valid source pixel under it that no summary stands for.
     void add_checks(MeshedTile& t, int z, ZoomSource from) const {
         if (from == ZoomSource::Summary) {
-            const int level = summary_level(
-                plan_.summary(), *plan_.pixels(), options_.scheme, z, options_.tile_size);
-            t.cells = summary_cells(plan_.summary(), *plan_.pixels(), t.raster, level);
+            const int level = plan_.summary_level_at(options_.scheme, z, options_.tile_size);
+            t.cells = summary_cells(plan_.summary(), *plan_.place(), t.raster, level);
             return;
         }
         const MemberSummaries* members = from == ZoomSource::Summaries ? plan_.members() : nullptr;
@@ -451,12 +450,12 @@ public:
                         std::int64_t row0,
                         int width,
                         int height) const override {
-        if (plan_.pixels()) {
+        if (plan_.place()) {
             const double pps = source_->pixels_per_sample(scheme, z, size);
             if (pps >= std::exp2(kFinestLevel)) {
                 const DemSummary& sum = plan_.summary();
                 return summary_lattice(sum,
-                                       *plan_.pixels(),
+                                       *plan_.place(),
                                        plan_.datum(),
                                        scheme,
                                        z,

@@ -285,6 +285,92 @@ TEST_CASE("a 4.3 Mpixel DEM: coarse tiles read from its summary keep every sourc
 
 namespace {
 
+// Heights of a rough test DEM at pixel (i, j): hills, a steep plane, one-pixel spikes, noise and
+// a round void (nodata), as the 4.3 Mpixel case has them.
+double rough_height(int i, int j, std::mt19937& rng) {
+    std::uniform_real_distribution<double> noise(0, 6);
+    double h = 1200 + 700 * std::sin(i / 143.0) * std::cos(j / 97.0) + 0.8 * i +
+               40 * std::sin(i / 7.0 + j / 11.0) + noise(rng);
+    if ((i * 7 + j * 13) % 211 == 0) {
+        h += 90;
+    }
+    return std::hypot(i - 1100, j - 500) < 60 ? -32768 : h;
+}
+
+// Judges a projected DEM's layer at zooms 7..10 (its own coarsest is 10: the DEM spans 16 km;
+// finer zooms read pixels as before) and its globe terrain at every zoom from 0 to 10: every source
+// pixel within the published error, zooms 7..9 read from the summary, and no filler where there is
+// data.
+void judge_projected(const std::string& path) {
+    LayerOptions options;
+    options.sources = {path};
+    options.min_zoom = 7;
+    const auto layer = Layer::open(options);
+    CHECK(layer->guarantee() == Guarantee::Measured);
+    static const tb_oracle::Geoid geoid;
+    const auto pixels = tb_oracle::read_pixels(path, geoid);
+    std::map<std::string, Published> published;
+    collect(*layer, "tileset.json", published);
+    for (int z = 7; z <= 10; ++z) {
+        CAPTURE(z);
+        CHECK(layer->zoom_source(z) == (z < 10 ? ZoomSource::Summary : ZoomSource::Lattice));
+        const Summary s = judge_zoom(*layer, pixels, published, z);
+        MESSAGE(path << " zoom " << z << ": " << s.pixels << " pixels, worst " << s.worst
+                     << " m, worst / published " << s.worst_ratio);
+        CHECK(s.pixels > 0);
+        CHECK(s.worst_ratio <= 1.0);
+    }
+    const LonLatBox box = DemSource::open({path})->footprint();
+    options.min_zoom.reset();
+    const auto natural = Layer::open(options);
+    for (int z = 0; z <= natural->min_zoom(); ++z) {
+        CAPTURE(z);
+        const TileRange r = tiles_covering(Scheme::Geodetic, box, z);
+        std::size_t judged = 0;
+        for (std::int64_t y = r.y0; y <= r.y1; ++y) {
+            for (std::int64_t x = r.x0; x <= r.x1; ++x) {
+                const TileId id{z, x, y};
+                const tb_qm::Tile t =
+                    tb_qm::read(natural->make_tile(natural->tile(id), Format::Terrain));
+                CHECK(tb_qm::metadata_of(t).find("\"filler\":true") == std::string::npos);
+                const auto [worst, count] =
+                    tb_qm::worst_pixel(t, tile_bounds(Scheme::Geodetic, id), pixels);
+                judged += count;
+                CHECK(worst <= tb_qm::published_error(t) + 1e-3);
+            }
+        }
+        CHECK(judged == pixels.size());
+    }
+}
+
+} // namespace
+
+TEST_CASE("a 1.9 Mpixel UTM DEM, and one on a turned grid: coarse tiles read from the summary "
+          "through the CRS keep every source pixel within the published error at every zoom, "
+          "and globe terrain draws the data from zoom 0") {
+    tb_test::ScratchDir dir;
+    tb_test::Fixture f;
+    f.width = 1601, f.height = 1201;
+    f.type = GDT_Int16;
+    f.nodata = -32768;
+    std::mt19937 rng(23);
+    for (int j = 0; j < f.height; ++j) {
+        for (int i = 0; i < f.width; ++i) {
+            f.values.push_back(rough_height(i, j, rng));
+        }
+    }
+    // 10 m pixels in UTM 32N near 7.0 E 47.0 N.
+    f.epsg = 32632;
+    f.geotransform = std::array<double, 6>{340000, 10, 0, 5215000, 0, -10};
+    judge_projected(tb_test::write_fixture(dir.file("utm.tif"), f));
+    // The same grid turned by 20 degrees.
+    const double c = 10 * std::cos(0.35), s = 10 * std::sin(0.35);
+    f.geotransform = std::array<double, 6>{340000, c, s, 5215000, s, -c};
+    judge_projected(tb_test::write_fixture(dir.file("turned.tif"), f));
+}
+
+namespace {
+
 // The truth of a collection ranked `first` over `second`: every valid pixel of `first`, and
 // each valid pixel of `second` whose centre lies in no valid pixel of `first` (read with GDAL,
 // located with OGR).
@@ -495,19 +581,19 @@ TEST_CASE("a collection's coarse zooms read its geographic DEM's summary: globe 
     options.sources = {coarse, fine};
     options.min_zoom = 4;
     const auto layer = Layer::open(options);
-    // The 3" DEM's summary serves the zooms whose lattice step spans 8 of its pixels (6 and
-    // coarser); the survey is read whole.
-    for (int z = 4; z <= 6; ++z) {
+    // Each summary serves the zooms whose lattice step spans 8 of its pixels: the 3" DEM's 6
+    // and coarser, the 10 m UTM survey's (its blocks carried through its CRS) 9 and coarser.
+    for (int z = 4; z <= 9; ++z) {
         CAPTURE(z);
         CHECK(layer->zoom_source(z) == ZoomSource::Summaries);
     }
-    CHECK(layer->zoom_source(7) == ZoomSource::Lattice);
+    CHECK(layer->zoom_source(10) == ZoomSource::Lattice);
 
     static const tb_oracle::Geoid geoid;
     const auto pixels = ranked_pixels(fine, coarse, geoid);
     std::map<std::string, Published> published;
     collect(*layer, "tileset.json", published);
-    for (int z = 4; z <= 7; ++z) {
+    for (int z = 4; z <= 10; ++z) {
         CAPTURE(z);
         const Summary s = judge_zoom(*layer, pixels, published, z);
         MESSAGE("3D Tiles zoom " << z << " (" << std::string(to_string(layer->zoom_source(z)))

@@ -6,8 +6,11 @@
 #include "tiler/sources/geoid.hpp"
 #include "tiler/summary/dem_summary.hpp"
 #include "tiler/summary/summary_file.hpp"
+#include "tiler/summary/summary_tile.hpp"
 
 #include <doctest/doctest.h>
+#include <gdal_priv.h>
+#include <ogr_spatialref.h>
 
 #include <cmath>
 #include <cstring>
@@ -168,7 +171,8 @@ TEST_CASE("every valid pixel of a DEM lies within its summary block's plane and 
     REQUIRE(grid);
     for (const VerticalDatum datum : {VerticalDatum::Egm96, VerticalDatum::Ellipsoid}) {
         CAPTURE(to_string(datum));
-        const DemSummary s = DemSummary::build(*source, *grid, datum);
+        const DemSummary s =
+            DemSummary::build(*source, PixelPlace(*source, Scheme::Geodetic), datum);
         CHECK(s.coarsest_level() == 9); // one block holds all 301 columns
         const std::vector<double> px = source->read_pixels(0, 0, f.width, f.height);
         for (int level = s.finest_level(); level <= s.coarsest_level(); ++level) {
@@ -254,8 +258,10 @@ struct MadeSummary {
         const auto source = DemSource::open({dem});
         const auto grid = source->pixel_grid(Scheme::Geodetic);
         REQUIRE(grid);
-        summary = DemSummary::build(*source, *grid, VerticalDatum::Ellipsoid);
-        const auto made_key = summary_key({dem}, std::nullopt, VerticalDatum::Ellipsoid, *grid);
+        summary = DemSummary::build(
+            *source, PixelPlace(*source, Scheme::Geodetic), VerticalDatum::Ellipsoid);
+        const auto made_key = summary_key(
+            {dem}, std::nullopt, VerticalDatum::Ellipsoid, PixelPlace(*source, Scheme::Geodetic));
         REQUIRE(made_key);
         key = *made_key;
     }
@@ -270,8 +276,10 @@ TEST_CASE("a summary saved to disk reads back block for block, and a damaged, cu
     const auto source = DemSource::open({dem});
     const auto grid = source->pixel_grid(Scheme::Geodetic);
     REQUIRE(grid);
-    const DemSummary made = DemSummary::build(*source, *grid, VerticalDatum::Ellipsoid);
-    const auto key = summary_key({dem}, std::nullopt, VerticalDatum::Ellipsoid, *grid);
+    const DemSummary made =
+        DemSummary::build(*source, PixelPlace(*source, Scheme::Geodetic), VerticalDatum::Ellipsoid);
+    const auto key = summary_key(
+        {dem}, std::nullopt, VerticalDatum::Ellipsoid, PixelPlace(*source, Scheme::Geodetic));
     REQUIRE(key);
     const auto path = summary_path(dir.file("cache"), dem, *key);
     CHECK(path.filename().string().rfind("rough-", 0) == 0);
@@ -281,7 +289,8 @@ TEST_CASE("a summary saved to disk reads back block for block, and a damaged, cu
     REQUIRE(read);
     CHECK(same_blocks(made, *read));
     // Another key (another datum) does not read this file.
-    const auto other = summary_key({dem}, std::nullopt, VerticalDatum::Egm96, *grid);
+    const auto other = summary_key(
+        {dem}, std::nullopt, VerticalDatum::Egm96, PixelPlace(*source, Scheme::Geodetic));
     REQUIRE(other);
     CHECK(*other != *key);
     CHECK(summary_path(dir.file("cache"), dem, *other) != path);
@@ -416,7 +425,8 @@ TEST_CASE("a sparse GeoTIFF's unwritten blocks are voids in the summary, not rea
     CHECK_FALSE(source->window_empty(1024, 2048, 256, 256));
     const auto grid = source->pixel_grid(Scheme::Geodetic);
     REQUIRE(grid);
-    const DemSummary s = DemSummary::build(*source, *grid, VerticalDatum::Ellipsoid);
+    const DemSummary s =
+        DemSummary::build(*source, PixelPlace(*source, Scheme::Geodetic), VerticalDatum::Ellipsoid);
     const std::vector<double> px = source->read_pixels(0, 0, n, n);
     std::size_t checked = 0, empty = 0;
     const int k = s.finest_level();
@@ -447,4 +457,116 @@ TEST_CASE("a sparse GeoTIFF's unwritten blocks are voids in the summary, not rea
     CHECK(k == kFinestLevel);
     CHECK(summary_finest_level(100000, 100000) == 6);
     CHECK(summary_finest_level(14404, 14404) == kFinestLevel);
+}
+
+namespace {
+
+// Every valid pixel of `source` inside the tile of `raster` lies in one of `cells` (box and
+// half-range): returns how many were checked. The pixel centres are moved to lon/lat with OGR
+// here, not through the tiler.
+std::size_t check_pixels_in_cells(const std::string& path,
+                                  const std::vector<double>& px,
+                                  int width,
+                                  const TileRaster& raster,
+                                  const std::vector<CheckCell>& cells) {
+    GDALDatasetUniquePtr ds(GDALDataset::Open(path.c_str(), GDAL_OF_RASTER));
+    REQUIRE(ds != nullptr);
+    double gt[6];
+    REQUIRE(ds->GetGeoTransform(gt) == CE_None);
+    OGRSpatialReference wgs84, src = *ds->GetSpatialRef();
+    wgs84.importFromEPSG(4326);
+    wgs84.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    src.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    std::unique_ptr<OGRCoordinateTransformation> ct(
+        OGRCreateCoordinateTransformation(&src, &wgs84));
+    REQUIRE(ct != nullptr);
+    // Cells bucketed by their boxes, 16 x 16 buckets over the tile's grid.
+    constexpr int kBuckets = 16;
+    const double side = static_cast<double>(raster.size) / kBuckets;
+    std::vector<std::vector<std::size_t>> buckets(kBuckets * kBuckets);
+    for (std::size_t k = 0; k < cells.size(); ++k) {
+        const CheckCell& c = cells[k];
+        for (int by = std::max(0, int(c.y0 / side)); by <= std::min(kBuckets - 1, int(c.y1 / side));
+             ++by) {
+            for (int bx = std::max(0, int(c.x0 / side));
+                 bx <= std::min(kBuckets - 1, int(c.x1 / side));
+                 ++bx) {
+                buckets[static_cast<std::size_t>(by * kBuckets + bx)].push_back(k);
+            }
+        }
+    }
+    std::size_t checked = 0;
+    for (std::size_t n = 0; n < px.size(); ++n) {
+        if (std::isnan(px[n])) {
+            continue;
+        }
+        const double i = static_cast<double>(n % static_cast<std::size_t>(width)) + 0.5;
+        const double j = static_cast<double>(n / static_cast<std::size_t>(width)) + 0.5;
+        double x = gt[0] + i * gt[1] + j * gt[2], y = gt[3] + i * gt[4] + j * gt[5];
+        REQUIRE(ct->Transform(1, &x, &y));
+        const LonLatBox& b = raster.bounds;
+        if (x < b.west || x > b.east || y < b.south || y > b.north) {
+            continue;
+        }
+        double col = 0, row = 0;
+        lonlat_to_grid(raster, {x, y}, col, row);
+        const int bx = std::clamp(int(col / side), 0, kBuckets - 1);
+        const int by = std::clamp(int(row / side), 0, kBuckets - 1);
+        bool held = false;
+        for (const std::size_t k : buckets[static_cast<std::size_t>(by * kBuckets + bx)]) {
+            const CheckCell& c = cells[k];
+            held =
+                held || (col >= c.x0 - 1e-9 && col <= c.x1 + 1e-9 && row >= c.y0 - 1e-9 &&
+                         row <= c.y1 + 1e-9 && std::abs(c.reference(col, row) - px[n]) <= c.half);
+        }
+        CHECK(held);
+        ++checked;
+    }
+    return checked;
+}
+
+} // namespace
+
+TEST_CASE("a summary of a grid turned against the tiles (polar stereographic, 1 km pixels): "
+          "every valid pixel lies in a cell of its tile, within the cell's range of its "
+          "reference, at coarse and fine levels") {
+    tb_test::ScratchDir dir;
+    tb_test::Fixture f;
+    f.width = f.height = 600;
+    f.type = GDT_Float32;
+    f.nodata = -9999;
+    f.epsg = 3413; // NSIDC sea ice polar stereographic north
+    f.geotransform = std::array<double, 6>{0, 1000, 0, -1200000, 0, -1000};
+    for (int j = 0; j < f.height; ++j) {
+        for (int i = 0; i < f.width; ++i) {
+            // A steep plane (its blocks have no range: the stray alone must hold it), with a
+            // void and a ridge.
+            const bool hole = std::hypot(i - 200, j - 400) < 50;
+            f.values.push_back(hole ? -9999 : 1000 + 5.0 * i - 3.0 * j + (i == j ? 80 : 0));
+        }
+    }
+    const std::string path = tb_test::write_fixture(dir.file("polar.tif"), f);
+    const auto source = DemSource::open({path});
+    const PixelPlace place(*source, Scheme::Geodetic);
+    REQUIRE_FALSE(place.serves());
+    const DemSummary s = DemSummary::build(*source, place, VerticalDatum::Ellipsoid);
+    const std::vector<double> px = source->read_pixels(0, 0, f.width, f.height);
+    std::size_t checked = 0;
+    for (const auto& [z, level] : {std::pair{2, 7}, std::pair{3, 6}, std::pair{4, 4}}) {
+        CAPTURE(z);
+        const TileRange r = tiles_covering(Scheme::Geodetic, source->footprint(), z);
+        for (std::int64_t y = r.y0; y <= r.y1; ++y) {
+            for (std::int64_t x = r.x0; x <= r.x1; ++x) {
+                TileRaster raster;
+                raster.id = {z, x, y};
+                raster.scheme = Scheme::Geodetic;
+                raster.bounds = tile_bounds(Scheme::Geodetic, raster.id);
+                raster.size = 256;
+                raster.grid.width = raster.grid.height = 257;
+                const auto cells = summary_cells(s, place, raster, level);
+                checked += check_pixels_in_cells(path, px, f.width, raster, cells);
+            }
+        }
+    }
+    CHECK(checked > 3 * 300000);
 }

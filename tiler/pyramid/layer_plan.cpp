@@ -154,7 +154,10 @@ LayerPlan::LayerPlan(const LayerOptions& options, const DemSource& source)
         covers_.emplace_back(z, ranges);
     }
     pixels_ = source_.pixel_grid(options_.scheme);
-    summary_ok_ = pixels_ && summary_serves(*pixels_, options_.scheme);
+    if (source_.members().empty()) {
+        place_.emplace(source_, options_.scheme);
+    }
+    summary_ok_ = place_.has_value();
     datum_ = options_.datum;
     if (datum_ == VerticalDatum::Auto) {
         datum_ = source_.ellipsoidal_heights() ? VerticalDatum::Ellipsoid : VerticalDatum::Egm96;
@@ -232,19 +235,25 @@ std::string LayerPlan::zoom_signature(int z) const {
 }
 
 ZoomSource LayerPlan::zoom_source(int z) const {
-    if (!pixels_) {
-        return members_ && members_->reads_summaries(z) ? ZoomSource::Summaries
-                                                        : ZoomSource::Lattice;
-    }
     // As max_zoom is planned: the first zoom whose lattice is as fine as the pixels.
-    if (source_.pixels_per_sample(options_.scheme, z, options_.tile_size) <= 1 + 1e-9) {
+    if (pixels_ && source_.pixels_per_sample(options_.scheme, z, options_.tile_size) <= 1 + 1e-9) {
         return ZoomSource::Pixels;
     }
-    if (summary_ok_ && pixels_per_step(*pixels_, options_.scheme, z, options_.tile_size) >=
-                           std::exp2(kFinestLevel)) {
-        return ZoomSource::Summary;
+    if (summary_ok_) {
+        // A zoom whose tiles would read more pixels than one tile may (pixels longer one way
+        // than the other, or a grid turned against the tiles') reads the summary too.
+        const double pps = place_->pixels_per_step(options_.scheme, z, options_.tile_size);
+        const bool summary = pps >= std::exp2(kFinestLevel) ||
+                             (pps > 1 + 1e-9 && tile_pixels(z) > kMaxPixelsPerTile);
+        return summary ? ZoomSource::Summary : ZoomSource::Lattice;
     }
-    return ZoomSource::Lattice;
+    return members_ && members_->reads_summaries(z) ? ZoomSource::Summaries : ZoomSource::Lattice;
+}
+
+int LayerPlan::summary_level_at(Scheme scheme, int z, int size) const {
+    const DemSummary& sum = summary();
+    const int level = summary_level(sum, *place_, scheme, z, size);
+    return level < 0 ? sum.finest_level() : level;
 }
 
 LatticeSampler LayerPlan::lattice_sampler(int z) const {
@@ -275,10 +284,17 @@ LatticeBlock LayerPlan::summary_sample(Scheme scheme,
                                        std::int64_t row0,
                                        int width,
                                        int height) const {
-    const DemSummary& sum = summary();
-    const int level = summary_level(sum, *pixels_, scheme, z, size);
-    return summary_lattice(
-        sum, *pixels_, datum_, scheme, z, size, level, column0, row0, width, height);
+    return summary_lattice(summary(),
+                           *place_,
+                           datum_,
+                           scheme,
+                           z,
+                           size,
+                           summary_level_at(scheme, z, size),
+                           column0,
+                           row0,
+                           width,
+                           height);
 }
 
 const TileCover& LayerPlan::cover_at(int z) const {
@@ -355,7 +371,7 @@ const std::vector<double>& LayerPlan::reach() const {
         for (int z = max_zoom_ - 1; z >= 0; --z) {
             const auto k = static_cast<std::size_t>(z);
             if (zoom_source(z) != ZoomSource::Pixels) {
-                reach_[k] = zoom_reach(summary(), *pixels_, options_.scheme, z, options_.tile_size);
+                reach_[k] = zoom_reach(summary(), *place_, options_.scheme, z, options_.tile_size);
             }
             reach_[k] = std::max(reach_[k], reach_[k + 1]);
         }
@@ -375,7 +391,7 @@ void LayerPlan::prepare() const {
 const DemSummary& LayerPlan::summary() const {
     std::call_once(summary_once_, [this] {
         summary_.emplace(
-            load_or_make_summary(options_, options_.sources, source_, *pixels_, datum_));
+            load_or_make_summary(options_, options_.sources, source_, *place_, datum_));
     });
     return *summary_;
 }

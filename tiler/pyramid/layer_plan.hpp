@@ -8,6 +8,7 @@
 #include "tiler/sources/gdal_source.hpp"
 #include "tiler/summary/dem_summary.hpp"
 #include "tiler/summary/member_summaries.hpp"
+#include "tiler/summary/pixel_place.hpp"
 #include "tiler/tile_grid.hpp"
 
 #include <mutex>
@@ -37,6 +38,9 @@ public:
     const TileCover& cover_at(int z) const;
     // The source's pixel grid in the scheme's CRS, if it has one (Layer::guarantee).
     const std::optional<PixelGrid>& pixels() const { return pixels_; }
+    // Where the pixels of a single DEM or mosaic lie, whatever its CRS (what its summary is cut
+    // along); null for a collection, whose members have their own.
+    const PixelPlace* place() const { return place_ ? &*place_ : nullptr; }
     VerticalDatum datum() const { return datum_; }
     double min_height() const { return min_height_; }
     double max_height() const { return max_height_; }
@@ -75,9 +79,12 @@ public:
     // The largest vertical distance between the geoid and any height of the DEM.
     double relief() const;
 
-    // The source's summary (a pixel-grid source only), made or loaded on first use (once,
-    // whichever thread asks first; tiler/summary/layer_summary.hpp).
+    // The source's summary (not a collection's), made or loaded on first use (once, whichever
+    // thread asks first; tiler/summary/layer_summary.hpp).
     const DemSummary& summary() const;
+    // The summary level zoom z of `scheme` reads: blocks no wider than a lattice step, or the
+    // finest for a zoom read from the summary whose step is narrower (zoom_source).
+    int summary_level_at(Scheme scheme, int z, int size) const;
     // The lattice points (column0 + i, row0 + j) of (scheme, z, size) off the summary's planes at
     // the zoom's level (summary_lattice): what a Summary zoom's tiles are meshed from.
     LatticeBlock summary_sample(Scheme scheme,
@@ -109,7 +116,8 @@ private:
     const LayerOptions& options_;
     const DemSource& source_;
     std::optional<PixelGrid> pixels_;
-    bool summary_ok_ = false; // the summary serves this scheme's coarse zooms (summary_serves)
+    std::optional<PixelPlace> place_;
+    bool summary_ok_ = false; // the source has a summary (not a collection)
     mutable std::once_flag summary_once_;
     mutable std::optional<DemSummary> summary_;
     std::optional<MemberSummaries> members_; // a collection's

@@ -137,6 +137,12 @@ public:
         return {};
     }
     bool window_empty(std::int64_t, std::int64_t, int, int) const override { return false; }
+    void pixels_to_lonlat(std::vector<double>&, std::vector<double>&) const override {
+        TB_ASSERT(!"a collection has no pixels of its own; its members have");
+    }
+    void lonlat_to_pixels(std::vector<double>&, std::vector<double>&) const override {
+        TB_ASSERT(!"a collection has no pixels of its own; its members have");
+    }
 
     void pixels_in(const LonLatBox& box, const PixelVisitor& visit) const override;
     std::size_t window_pixels(const LonLatBox& box) const override {

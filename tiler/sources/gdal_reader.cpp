@@ -221,6 +221,8 @@ public:
     std::optional<PixelGrid> pixel_grid(Scheme scheme) const override {
         return grids_[scheme == Scheme::Geodetic ? 0 : 1];
     }
+    void pixels_to_lonlat(std::vector<double>& x, std::vector<double>& y) const override;
+    void lonlat_to_pixels(std::vector<double>& x, std::vector<double>& y) const override;
     std::vector<double>
     read_pixels(std::int64_t column0, std::int64_t row0, int width, int height) const override;
     bool
@@ -827,6 +829,44 @@ void GdalDemSource::to_lonlat(std::vector<double>& x,
         }
     }
     h->to_lonlat->Transform(static_cast<int>(x.size()), x.data(), y.data(), nullptr, good.data());
+}
+
+void GdalDemSource::pixels_to_lonlat(std::vector<double>& x, std::vector<double>& y) const {
+    TB_ASSERT(georeferenced_ && x.size() == y.size());
+    const auto& g = info_.geotransform;
+    for (std::size_t k = 0; k < x.size(); ++k) {
+        const double u = x[k] + 0.5, v = y[k] + 0.5;
+        x[k] = g[0] + u * g[1] + v * g[2];
+        y[k] = g[3] + u * g[4] + v * g[5];
+    }
+    std::vector<int> good(x.size(), 0);
+    to_lonlat(x, y, good);
+    for (std::size_t k = 0; k < x.size(); ++k) {
+        if (!good[k] || !std::isfinite(x[k]) || !std::isfinite(y[k])) {
+            x[k] = y[k] = NAN;
+        }
+    }
+}
+
+void GdalDemSource::lonlat_to_pixels(std::vector<double>& x, std::vector<double>& y) const {
+    TB_ASSERT(georeferenced_ && x.size() == y.size());
+    std::vector<int> good(x.size(), 1);
+    {
+        Lease h = acquire();
+        if (OGRCoordinateTransformation* ct = transform_for(*h, Scheme::Geodetic)) {
+            ct->Transform(static_cast<int>(x.size()), x.data(), y.data(), nullptr, good.data());
+        }
+    }
+    const auto& t = inverse_;
+    for (std::size_t k = 0; k < x.size(); ++k) {
+        if (!good[k] || !std::isfinite(x[k]) || !std::isfinite(y[k])) {
+            x[k] = y[k] = NAN;
+            continue;
+        }
+        const double u = t[0] + x[k] * t[1] + y[k] * t[2] - 0.5;
+        y[k] = t[3] + x[k] * t[4] + y[k] * t[5] - 0.5;
+        x[k] = u;
+    }
 }
 
 core::HeightGrid GdalDemSource::read_all() const {

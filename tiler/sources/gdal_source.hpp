@@ -300,6 +300,14 @@ public:
     // Requires georeferenced().
     virtual std::optional<PixelGrid> pixel_grid(Scheme scheme) const = 0;
 
+    // Pixel coordinates to WGS84 lon/lat, in place: (x[k], y[k]) = (i, j), pixel (i, j)'s centre
+    // at integer i and j, through the geotransform and the CRS, whatever they are (a UTM grid,
+    // a rotated one). A point that does not transform becomes NaN. Requires georeferenced();
+    // not for a collection (its members have pixels). Thread-safe.
+    virtual void pixels_to_lonlat(std::vector<double>& x, std::vector<double>& y) const = 0;
+    // The inverse: lon/lat to fractional pixel coordinates, NaN where it fails.
+    virtual void lonlat_to_pixels(std::vector<double>& x, std::vector<double>& y) const = 0;
+
     // Band 1 at full resolution over columns [column0, column0 + width) and rows [row0, row0 +
     // height), row-major; NaN where the source has nodata or the window leaves the raster.
     // Thread-safe.

@@ -199,8 +199,53 @@ int summary_finest_level(std::int64_t width, std::int64_t height) {
     return level;
 }
 
+namespace {
+
+// Adds the EGM96 undulation at each pixel centre of a window: by row and column on a lon/lat
+// grid (`columns` made for it), else at each centre moved to lon/lat.
+void add_undulation(std::vector<double>& px,
+                    const std::string& path,
+                    const PixelPlace& place,
+                    const std::vector<Egm96Column>& columns,
+                    std::int64_t column0,
+                    std::int64_t row0,
+                    int width,
+                    int height) {
+    const std::optional<PixelGrid>& grid = place.grid();
+    std::vector<double> lon, lat;
+    for (int j = 0; j < height; ++j) {
+        double* row = px.data() + static_cast<std::size_t>(j) * width;
+        if (grid && grid->lonlat) {
+            const Egm96Row r = egm96_row(grid->y(row0 + j));
+            for (int i = 0; i < width; ++i) {
+                row[i] += egm96_at(columns[static_cast<std::size_t>(column0 + i)], r);
+            }
+            continue;
+        }
+        lon.resize(static_cast<std::size_t>(width));
+        lat.assign(static_cast<std::size_t>(width), static_cast<double>(row0 + j));
+        for (int i = 0; i < width; ++i) {
+            lon[static_cast<std::size_t>(i)] = static_cast<double>(column0 + i);
+        }
+        place.to_lonlat(lon, lat);
+        for (int i = 0; i < width; ++i) {
+            const auto k = static_cast<std::size_t>(i);
+            if (!std::isnan(row[i])) {
+                if (std::isnan(lon[k])) {
+                    throw InputError(path + ": pixel (" + std::to_string(column0 + i) + ", " +
+                                     std::to_string(row0 + j) +
+                                     ") does not transform to lon/lat; check the DEM's CRS");
+                }
+                row[i] += egm96_undulation(lon[k], lat[k]);
+            }
+        }
+    }
+}
+
+} // namespace
+
 void DemSummary::fit_window(const DemSource& source,
-                            const PixelGrid& grid,
+                            const PixelPlace& place,
                             const std::vector<Egm96Column>& columns,
                             VerticalDatum datum,
                             std::int64_t column0,
@@ -213,13 +258,7 @@ void DemSummary::fit_window(const DemSource& source,
     }
     std::vector<double> px = source.read_pixels(column0, row0, width, height);
     if (datum == VerticalDatum::Egm96) {
-        for (int j = 0; j < height; ++j) {
-            const Egm96Row r = egm96_row(lat_of(grid, column0, row0 + j));
-            for (int i = 0; i < width; ++i) {
-                px[static_cast<std::size_t>(j) * width + i] +=
-                    egm96_at(columns[static_cast<std::size_t>(column0 + i)], r);
-            }
-        }
+        add_undulation(px, source.info().path, place, columns, column0, row0, width, height);
     }
     auto& finest = levels_.front();
     const std::int64_t across = blocks_across(k);
@@ -231,35 +270,37 @@ void DemSummary::fit_window(const DemSource& source,
     }
 }
 
-DemSummary DemSummary::build(const DemSource& source, const PixelGrid& grid, VerticalDatum datum) {
+DemSummary
+DemSummary::build(const DemSource& source, const PixelPlace& place, VerticalDatum datum) {
     DemSummary s;
-    s.width_ = grid.width;
-    s.height_ = grid.height;
-    s.finest_ = summary_finest_level(grid.width, grid.height);
+    s.width_ = place.width();
+    s.height_ = place.height();
+    s.finest_ = summary_finest_level(s.width_, s.height_);
     const std::string& path = source.info().path;
-    log::info(path + ": making its multi-resolution summary (" + std::to_string(grid.width) +
-              " x " + std::to_string(grid.height) + " pixels, blocks of " +
-              std::to_string(1 << s.finest_) + " pixels and up)");
+    log::info(path + ": making its multi-resolution summary (" + std::to_string(s.width_) + " x " +
+              std::to_string(s.height_) + " pixels, blocks of " + std::to_string(1 << s.finest_) +
+              " pixels and up)");
     std::vector<Egm96Column> columns;
-    if (datum == VerticalDatum::Egm96) {
-        columns.resize(static_cast<std::size_t>(grid.width));
-        for (int i = 0; i < grid.width; ++i) {
-            columns[static_cast<std::size_t>(i)] = egm96_column(s.lon_of(grid, i, 0));
+    if (datum == VerticalDatum::Egm96 && place.grid() && place.grid()->lonlat) {
+        columns.resize(static_cast<std::size_t>(s.width_));
+        for (int i = 0; i < s.width_; ++i) {
+            columns[static_cast<std::size_t>(i)] = egm96_column(place.grid()->x(i));
         }
     }
+    const int W = s.width_, H = s.height_;
     // Windows of at most 256 x 2048 pixels (16 MiB of doubles), whole blocks each.
     const int rows = std::max(256, 1 << s.finest_), cols = std::max(2048, 1 << s.finest_);
     s.levels_.emplace_back(
         static_cast<std::size_t>(s.blocks_across(s.finest_) * s.blocks_down(s.finest_)), kEmpty);
     int reported = 0;
-    for (std::int64_t row0 = 0; row0 < grid.height; row0 += rows) {
-        const int h = static_cast<int>(std::min<std::int64_t>(rows, grid.height - row0));
-        for (std::int64_t column0 = 0; column0 < grid.width; column0 += cols) {
-            const int w = static_cast<int>(std::min<std::int64_t>(cols, grid.width - column0));
-            s.fit_window(source, grid, columns, datum, column0, row0, w, h);
+    for (std::int64_t row0 = 0; row0 < H; row0 += rows) {
+        const int h = static_cast<int>(std::min<std::int64_t>(rows, H - row0));
+        for (std::int64_t column0 = 0; column0 < W; column0 += cols) {
+            const int w = static_cast<int>(std::min<std::int64_t>(cols, W - column0));
+            s.fit_window(source, place, columns, datum, column0, row0, w, h);
         }
-        const int percent = static_cast<int>(100 * (row0 + h) / grid.height);
-        if (percent >= reported + 10 || row0 + h == grid.height) {
+        const int percent = static_cast<int>(100 * (row0 + h) / H);
+        if (percent >= reported + 10 || row0 + h == H) {
             reported = percent;
             log::info(path + ": summary " + std::to_string(percent) + " % read");
         }
@@ -301,14 +342,6 @@ DemSummary::from_levels(int width, int height, std::vector<std::vector<SummaryBl
     }
     s.levels_ = std::move(levels);
     return s;
-}
-
-double DemSummary::lon_of(const PixelGrid& grid, std::int64_t i, std::int64_t j) {
-    return grid.lonlat ? grid.x(i) : native_to_lonlat(Scheme::Mercator, grid.x(i), grid.y(j)).lon;
-}
-
-double DemSummary::lat_of(const PixelGrid& grid, std::int64_t i, std::int64_t j) {
-    return grid.lonlat ? grid.y(j) : native_to_lonlat(Scheme::Mercator, grid.x(i), grid.y(j)).lat;
 }
 
 } // namespace tb::tiler

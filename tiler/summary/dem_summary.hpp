@@ -1,6 +1,6 @@
 #pragma once
-// The multi-resolution summary of a DEM whose pixels lie on a tiling scheme's grid: what a
-// coarse tile reads instead of the full-resolution pixels under it.
+// The multi-resolution summary of a DEM: what a coarse tile reads instead of the full-resolution
+// pixels under it. Its blocks are the source's own pixels, in whatever CRS (pixel_place.hpp).
 //
 // Level k cuts the source into blocks of 2^k x 2^k pixels (block (bx, by) holds pixel columns
 // bx 2^k .. bx 2^k + 2^k - 1, rows likewise, clipped to the raster). Each block keeps a plane
@@ -21,6 +21,7 @@
 #include "tiler/layer.hpp"
 #include "tiler/sources/gdal_source.hpp"
 #include "tiler/sources/geoid.hpp"
+#include "tiler/summary/pixel_place.hpp"
 
 #include <cmath>
 #include <cstdint>
@@ -51,8 +52,9 @@ int summary_finest_level(std::int64_t width, std::int64_t height);
 class DemSummary {
 public:
     // Reads every pixel of `source` once, in strips, converting heights to the WGS84 ellipsoid
-    // (`datum`: Egm96 adds the EGM96 undulation at each pixel centre), and logs its progress.
-    static DemSummary build(const DemSource& source, const PixelGrid& grid, VerticalDatum datum);
+    // (`datum`: Egm96 adds the EGM96 undulation at each pixel centre, `place` saying where that
+    // is), and logs its progress.
+    static DemSummary build(const DemSource& source, const PixelPlace& place, VerticalDatum datum);
 
     int width() const { return width_; } // the source's pixels
     int height() const { return height_; }
@@ -91,7 +93,7 @@ public:
     // (height) and fits the finest level's blocks in it (both a multiple of the blocks' side
     // away from 0); skipped when GDAL knows the window holds no data (sparse files).
     void fit_window(const DemSource& source,
-                    const PixelGrid& grid,
+                    const PixelPlace& place,
                     const std::vector<Egm96Column>& undulation_columns,
                     VerticalDatum datum,
                     std::int64_t column0,
@@ -101,8 +103,6 @@ public:
 
 private:
     SummaryBlock fit_children(int level, std::int64_t bx, std::int64_t by) const;
-    static double lon_of(const PixelGrid& grid, std::int64_t i, std::int64_t j);
-    static double lat_of(const PixelGrid& grid, std::int64_t i, std::int64_t j);
 
     int width_ = 0, height_ = 0;
     int finest_ = kFinestLevel;

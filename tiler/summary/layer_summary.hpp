@@ -6,13 +6,13 @@
 
 namespace tb::tiler {
 
-// The summary of a pixel-grid source kept on disk for this source and these settings
+// The summary of a source kept on disk for this source and these settings
 // (options.summary_dir, nodata; `files`: the source's files; datum: the layer's, resolved),
 // else made, and kept where options.summary_dir allows. Throws like DemSummary::build.
 DemSummary load_or_make_summary(const LayerOptions& options,
                                 const std::vector<std::string>& files,
                                 const DemSource& source,
-                                const PixelGrid& pixels,
+                                const PixelPlace& place,
                                 VerticalDatum datum);
 
 } // namespace tb::tiler

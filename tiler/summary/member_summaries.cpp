@@ -23,8 +23,7 @@ MemberSummaries::MemberSummaries(const LayerOptions& options,
     : options_(options), datum_(datum) {
     for (auto& source : collection.members()) {
         auto m = std::make_unique<Member>();
-        m->grid = source->pixel_grid(options_.scheme);
-        m->serves = m->grid && summary_serves(*m->grid, options_.scheme);
+        m->place.emplace(*source, options_.scheme);
         m->source = std::move(source);
         members_.push_back(std::move(m));
     }
@@ -34,7 +33,7 @@ MemberSummaries::MemberSummaries(const LayerOptions& options,
 const DemSummary& MemberSummaries::summary(const Member& m) const {
     std::call_once(m.once, [&] {
         m.summary.emplace(
-            load_or_make_summary(options_, m.source->info().files, *m.source, *m.grid, datum_));
+            load_or_make_summary(options_, m.source->info().files, *m.source, *m.place, datum_));
     });
     return *m.summary;
 }
@@ -42,12 +41,7 @@ const DemSummary& MemberSummaries::summary(const Member& m) const {
 // The rule one DEM's layer follows (LayerPlan::zoom_source for its tiles, Layer::sample for other
 // lattices): pixels per lattice step on a grid that serves the scheme, else pixels per sample.
 int MemberSummaries::level(const Member& m, Scheme scheme, int z, int size) const {
-    if (!m.grid) {
-        return -1;
-    }
-    const double pps = summary_serves(*m.grid, scheme)
-                           ? pixels_per_step(*m.grid, scheme, z, size)
-                           : m.source->pixels_per_sample(scheme, z, size);
+    const double pps = m.place->pixels_per_step(scheme, z, size);
     if (pps < std::exp2(kFinestLevel)) {
         return -1;
     }
@@ -56,8 +50,8 @@ int MemberSummaries::level(const Member& m, Scheme scheme, int z, int size) cons
 
 bool MemberSummaries::reads_summary(std::size_t m, int z) const {
     const Member& member = *members_.at(m);
-    return member.serves && pixels_per_step(*member.grid, options_.scheme, z, options_.tile_size) >=
-                                std::exp2(kFinestLevel);
+    return member.place->pixels_per_step(options_.scheme, z, options_.tile_size) >=
+           std::exp2(kFinestLevel);
 }
 
 void MemberSummaries::prepare(int z0, int z1) const {
@@ -103,7 +97,7 @@ LatticeBlock MemberSummaries::sample(Scheme scheme,
             return m.source->sample(scheme, z, size, column0, row0, width, height);
         }
         return summary_lattice(
-            summary(m), *m.grid, datum_, scheme, z, size, at, column0, row0, width, height);
+            summary(m), *m.place, datum_, scheme, z, size, at, column0, row0, width, height);
     };
     LatticeBlock out = read(*members_.front());
     for (std::size_t m = 1; m < members_.size(); ++m) {
@@ -129,8 +123,8 @@ std::vector<CheckCell> MemberSummaries::cells(const TileRaster& raster, int z) c
             continue;
         }
         const DemSummary& sum = summary(member);
-        const int at = summary_level(sum, *member.grid, options_.scheme, z, options_.tile_size);
-        const std::vector<CheckCell> some = summary_cells(sum, *member.grid, raster, at);
+        const int at = summary_level(sum, *member.place, options_.scheme, z, options_.tile_size);
+        const std::vector<CheckCell> some = summary_cells(sum, *member.place, raster, at);
         out.insert(out.end(), some.begin(), some.end());
     }
     return out;

@@ -1,6 +1,6 @@
 #pragma once
-// The summaries of a collection's members (collection_source.hpp), one per member whose pixels
-// lie on a grid the scheme can read a summary of: what a collection's coarse tiles read, so that
+// The summaries of a collection's members (collection_source.hpp), one per member, whatever its
+// CRS (pixel_place.hpp): what a collection's coarse tiles read, so that
 // they cost about their own number of samples whatever the size of the DEMs under them, as one
 // DEM's coarse tiles do (summary_tile.hpp).
 //
@@ -15,6 +15,7 @@
 #include "tiler/mesh/cell_check.hpp"
 #include "tiler/sources/gdal_source.hpp"
 #include "tiler/summary/dem_summary.hpp"
+#include "tiler/summary/pixel_place.hpp"
 
 #include <cstdint>
 #include <memory>
@@ -31,8 +32,8 @@ public:
     // must outlive it. Summaries are loaded or made on first use, each once.
     MemberSummaries(const LayerOptions& options, const DemSource& collection, VerticalDatum datum);
 
-    // Whether member m's tiles of zoom z read its summary (its grid serves the layer's scheme and
-    // a lattice step spans at least a finest block), and whether any member's do.
+    // Whether member m's tiles of zoom z read its summary (a lattice step spans at least a finest
+    // block), and whether any member's do.
     bool reads_summary(std::size_t m, int z) const;
     bool reads_summaries(int z) const;
     // Source pixels one tile of zoom z reads at most from the members that do not read their
@@ -64,9 +65,8 @@ public:
 private:
     struct Member {
         std::shared_ptr<const DemSource> source;
-        std::optional<PixelGrid> grid; // its pixel grid in the layer's scheme, if it has one
-        bool serves = false;           // the grid serves the layer's scheme (summary_serves)
-        mutable std::once_flag once;   // the summary, made on first use
+        std::optional<PixelPlace> place; // where its pixels lie (set once `source` is)
+        mutable std::once_flag once;     // the summary, made on first use
         mutable std::optional<DemSummary> summary;
     };
     const DemSummary& summary(const Member& m) const;

@@ -103,7 +103,7 @@ std::optional<DemSummary> decode_levels(const std::string& in, std::size_t at, s
 std::optional<std::string> summary_key(const std::vector<std::string>& sources,
                                        std::optional<double> nodata,
                                        VerticalDatum datum,
-                                       const PixelGrid& grid,
+                                       const PixelPlace& place,
                                        const ValidRange& range) {
     std::ostringstream key;
     key.precision(17);
@@ -123,8 +123,7 @@ std::optional<std::string> summary_key(const std::vector<std::string>& sources,
     if (!range.is_default()) {
         key << "\nvalid " << range.low << " " << range.high;
     }
-    key << "\ngrid " << grid.x0 << " " << grid.y0 << " " << grid.dx << " " << grid.dy << " "
-        << grid.width << " " << grid.height << " " << (grid.lonlat ? "lonlat" : "mercator");
+    key << "\ngrid " << place.key();
     return key.str();
 }
 

@@ -4,10 +4,10 @@
 //
 // The file's name and its first record hold a key made of everything the summary depends on:
 // each source's absolute path, size and modification time (nanoseconds), the nodata override,
-// the vertical datum, the pixel grid and the format's version. A changed source gives a new key,
-// so a stale summary is never read: its file is simply not the one looked for (or, on a hash
-// collision, its key does not match). The file ends with a CRC-32 of everything before it; a
-// damaged, truncated or foreign file is reported and made again.
+// the vertical datum, where the pixels lie (PixelPlace::key) and the format's version. A changed
+// source gives a new key, so a stale summary is never read: its file is simply not the one looked
+// for (or, on a hash collision, its key does not match). The file ends with a CRC-32 of everything
+// before it; a damaged, truncated or foreign file is reported and made again.
 //
 // Layout (little-endian, as written by the machines Terrabound runs on): "TBSUMM01", u32 key
 // size, the key, i32 width, i32 height, u32 level count, per level a u64 block count and its
@@ -34,7 +34,7 @@ inline constexpr std::int64_t kSummaryFilePixels = std::int64_t{16} << 20;
 std::optional<std::string> summary_key(const std::vector<std::string>& sources,
                                        std::optional<double> nodata,
                                        VerticalDatum datum,
-                                       const PixelGrid& grid,
+                                       const PixelPlace& place,
                                        const ValidRange& range = {});
 
 // DIR/{stem of the first source}-{hash of key}.tbsum

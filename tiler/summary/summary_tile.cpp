@@ -2,6 +2,7 @@
 #include "tiler/summary/summary_tile.hpp"
 
 #include "tiler/sources/geoid.hpp"
+#include "tiler/summary/projected_cells.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -21,20 +22,39 @@ void to_pixel(const PixelGrid& g, Scheme scheme, double x, double y, double& i, 
     j = (g.y0 - y) / g.dy - 0.5;
 }
 
+// Source pixel coordinates of lattice row `row`'s columns column0 .. column0 + width - 1.
+void lattice_row_to_pixels(const PixelPlace& place,
+                           Scheme scheme,
+                           int z,
+                           int size,
+                           std::int64_t column0,
+                           std::int64_t row,
+                           int width,
+                           std::vector<double>& is,
+                           std::vector<double>& js) {
+    is.resize(static_cast<std::size_t>(width));
+    js.resize(static_cast<std::size_t>(width));
+    const double y = lattice_y(scheme, z, size, row);
+    for (int c = 0; c < width; ++c) {
+        const double x = lattice_x(scheme, z, size, column0 + c);
+        const auto k = static_cast<std::size_t>(c);
+        if (place.grid()) {
+            to_pixel(*place.grid(), scheme, x, y, is[k], js[k]);
+        } else {
+            const LonLat p = native_to_lonlat(scheme, x, y);
+            is[k] = p.lon, js[k] = p.lat;
+        }
+    }
+    if (!place.grid()) {
+        place.to_pixels(is, js);
+    }
+}
+
 } // namespace
 
-bool summary_serves(const PixelGrid& grid, Scheme scheme) {
-    return grid.lonlat == (scheme == Scheme::Geodetic);
-}
-
-double pixels_per_step(const PixelGrid& grid, Scheme scheme, int z, int size) {
-    const double step = lattice_x(scheme, z, size, 1) - lattice_x(scheme, z, size, 0);
-    return step / std::max(grid.dx, grid.dy);
-}
-
 int summary_level(
-    const DemSummary& summary, const PixelGrid& grid, Scheme scheme, int z, int size) {
-    return summary_level(summary, pixels_per_step(grid, scheme, z, size));
+    const DemSummary& summary, const PixelPlace& place, Scheme scheme, int z, int size) {
+    return summary_level(summary, place.pixels_per_step(scheme, z, size));
 }
 
 int summary_level(const DemSummary& summary, double pixels_per_step) {
@@ -48,31 +68,39 @@ int summary_level(const DemSummary& summary, double pixels_per_step) {
 }
 
 double
-zoom_reach(const DemSummary& summary, const PixelGrid& grid, Scheme scheme, int z, int size) {
-    const double step = pixels_per_step(grid, scheme, z, size);
+zoom_reach(const DemSummary& summary, const PixelPlace& place, Scheme scheme, int z, int size) {
+    const double step = place.pixels_per_step(scheme, z, size);
     const int level = std::max(summary_level(summary, step), summary.finest_level());
     const double scale = step / std::exp2(level);
-    std::map<std::pair<std::int64_t, std::int64_t>, double> roughest; // per tile (x, y)
+    // Each block's middle pixel, moved to lon/lat all at once.
+    std::vector<double> lons, lats, roughness;
     for (std::int64_t by = 0; by < summary.blocks_down(level); ++by) {
         for (std::int64_t bx = 0; bx < summary.blocks_across(level); ++bx) {
             const SummaryBlock* b = summary.block(level, bx, by);
             if (b == nullptr || b->empty()) {
                 continue;
             }
-            // The tile holding the block's middle pixel.
-            const auto i = ((bx << level) + summary.last_column(level, bx)) / 2;
-            const auto j = ((by << level) + summary.last_row(level, by)) / 2;
-            const LonLat p = grid.lonlat ? LonLat{grid.x(i), grid.y(j)}
-                                         : native_to_lonlat(Scheme::Mercator, grid.x(i), grid.y(j));
-            constexpr double kPoint = 1e-9; // degrees: a box around the point, inside one tile
-            const TileRange r = tiles_covering(
-                scheme, {p.lon - kPoint, p.lat - kPoint, p.lon + kPoint, p.lat + kPoint}, z);
-            if (r.empty()) {
-                continue;
-            }
-            double& rough = roughest[{r.x0, r.y0}];
-            rough = std::max(rough, (static_cast<double>(b->high) - b->low) * scale);
+            lons.push_back(
+                static_cast<double>(((bx << level) + summary.last_column(level, bx)) / 2));
+            lats.push_back(static_cast<double>(((by << level) + summary.last_row(level, by)) / 2));
+            roughness.push_back((static_cast<double>(b->high) - b->low) * scale);
         }
+    }
+    place.to_lonlat(lons, lats);
+    std::map<std::pair<std::int64_t, std::int64_t>, double> roughest; // per tile (x, y)
+    for (std::size_t k = 0; k < lons.size(); ++k) {
+        constexpr double kPoint = 1e-9; // degrees: a box around the point, inside one tile
+        const double lon = lons[k], lat = lats[k];
+        const TileRange r =
+            std::isnan(lon)
+                ? TileRange{}
+                : tiles_covering(
+                      scheme, {lon - kPoint, lat - kPoint, lon + kPoint, lat + kPoint}, z);
+        if (r.empty()) {
+            continue;
+        }
+        double& rough = roughest[{r.x0, r.y0}];
+        rough = std::max(rough, roughness[k]);
     }
     if (roughest.empty()) {
         return 0.0;
@@ -88,7 +116,7 @@ zoom_reach(const DemSummary& summary, const PixelGrid& grid, Scheme scheme, int 
 }
 
 LatticeBlock summary_lattice(const DemSummary& summary,
-                             const PixelGrid& grid,
+                             const PixelPlace& place,
                              VerticalDatum datum,
                              Scheme scheme,
                              int z,
@@ -103,17 +131,17 @@ LatticeBlock summary_lattice(const DemSummary& summary,
     const std::size_t count = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
     out.heights.assign(count, 0.0);
     out.valid.assign(count, 0);
+    const int W = place.width(), H = place.height();
+    std::vector<double> is, js;
     for (int r = 0; r < height; ++r) {
-        const double y = lattice_y(scheme, z, size, row0 + r);
+        lattice_row_to_pixels(place, scheme, z, size, column0, row0 + r, width, is, js);
         for (int c = 0; c < width; ++c) {
-            const double x = lattice_x(scheme, z, size, column0 + c);
-            double i = 0, j = 0;
-            to_pixel(grid, scheme, x, y, i, j);
-            if (!(i >= -0.5 && j >= -0.5 && i <= grid.width - 0.5 && j <= grid.height - 0.5)) {
-                continue;
+            const double i = is[static_cast<std::size_t>(c)], j = js[static_cast<std::size_t>(c)];
+            if (!(i >= -0.5 && j >= -0.5 && i <= W - 0.5 && j <= H - 0.5)) {
+                continue; // NaN too
             }
-            const auto col = std::clamp<std::int64_t>(std::llround(i), 0, grid.width - 1);
-            const auto row = std::clamp<std::int64_t>(std::llround(j), 0, grid.height - 1);
+            const auto col = std::clamp<std::int64_t>(std::llround(i), 0, W - 1);
+            const auto row = std::clamp<std::int64_t>(std::llround(j), 0, H - 1);
             const std::int64_t bx = col >> level, by = row >> level;
             const SummaryBlock* b = summary.block(level, bx, by);
             if (b == nullptr || b->empty()) {
@@ -124,7 +152,9 @@ LatticeBlock summary_lattice(const DemSummary& summary,
             // far above or below every pixel near the point (7,766 m over a DEM below 1,900 m).
             double h = DemSummary::plane(*b, level, bx, by, i, j);
             if (datum == VerticalDatum::Egm96) {
-                const LonLat p = native_to_lonlat(scheme, x, y);
+                const LonLat p = native_to_lonlat(scheme,
+                                                  lattice_x(scheme, z, size, column0 + c),
+                                                  lattice_y(scheme, z, size, row0 + r));
                 h -= egm96_undulation(p.lon, p.lat);
             }
             const std::size_t k = static_cast<std::size_t>(r) * width + c;
@@ -136,9 +166,13 @@ LatticeBlock summary_lattice(const DemSummary& summary,
 }
 
 std::vector<CheckCell> summary_cells(const DemSummary& summary,
-                                     const PixelGrid& grid,
+                                     const PixelPlace& place,
                                      const TileRaster& raster,
                                      int level) {
+    if (!place.serves()) {
+        return projected_cells(summary, place, raster, level);
+    }
+    const PixelGrid& grid = *place.grid();
     const GridFrame f = frame_of(raster);
     // The tile's box in pixel coordinates, then the pixel centres inside it (closed).
     double i_west = 0, j_north = 0, i_east = 0, j_south = 0;

@@ -6,26 +6,19 @@
 #include "tiler/mesh/cell_check.hpp"
 #include "tiler/sources/gdal_source.hpp"
 #include "tiler/summary/dem_summary.hpp"
+#include "tiler/summary/pixel_place.hpp"
 
 #include <cstdint>
 #include <vector>
 
 namespace tb::tiler {
 
-// True when the summary can serve `scheme`'s tiles of a source on `grid`: the pixel grid and
-// the scheme's lattice are scaled copies of each other along both axes (a lon/lat grid for the
-// geodetic scheme, an EPSG:3857 grid for mercator), so a block's plane stays a plane in the
-// tile's grid coordinates.
-bool summary_serves(const PixelGrid& grid, Scheme scheme);
-
-// Source pixels per lattice step at zoom z (the smaller of the two axes).
-double pixels_per_step(const PixelGrid& grid, Scheme scheme, int z, int size);
-
 // The summary level a zoom reads: its blocks no wider than a lattice step, so each lattice cell
 // is judged against blocks of its own size or smaller (or the summary's finest, for a source too
 // large to keep kFinestLevel). -1 when the step is narrower than kFinestLevel's blocks (such a
 // zoom reads pixels).
-int summary_level(const DemSummary& summary, const PixelGrid& grid, Scheme scheme, int z, int size);
+int summary_level(
+    const DemSummary& summary, const PixelPlace& place, Scheme scheme, int z, int size);
 // The same for a given number of source pixels per lattice step (any lattice, e.g. DEM tiles').
 int summary_level(const DemSummary& summary, double pixels_per_step);
 
@@ -36,14 +29,15 @@ int summary_level(const DemSummary& summary, double pixels_per_step);
 // drawn closer to its pixels than about half its cells' ranges, whatever its triangles, so a
 // layer meshes such zooms at a share of the reach instead of paying for flat-lattice detail that
 // the published bound cannot show.
-double zoom_reach(const DemSummary& summary, const PixelGrid& grid, Scheme scheme, int z, int size);
+double
+zoom_reach(const DemSummary& summary, const PixelPlace& place, Scheme scheme, int z, int size);
 
 // The lattice points (column0 + i, row0 + j) of (scheme, z, size), as DemSource::sample gives
 // them, each the plane of the block it lies in: heights in the source's datum (EGM96 sources: the
 // summary's ellipsoidal height less the undulation, which the tile raster adds back), valid where
 // the point lies in a block with data.
 LatticeBlock summary_lattice(const DemSummary& summary,
-                             const PixelGrid& grid,
+                             const PixelPlace& place,
                              VerticalDatum datum,
                              Scheme scheme,
                              int z,
@@ -55,9 +49,10 @@ LatticeBlock summary_lattice(const DemSummary& summary,
                              int height);
 
 // The blocks of `level` holding valid pixel centres inside the tile of `raster` (a lattice
-// raster), each clipped to the tile, in raster's grid coordinates.
+// raster), each clipped to the tile, in raster's grid coordinates: axis-aligned boxes on a grid
+// that serves the scheme, else the bounds projected_cells gives.
 std::vector<CheckCell> summary_cells(const DemSummary& summary,
-                                     const PixelGrid& grid,
+                                     const PixelPlace& place,
                                      const TileRaster& raster,
                                      int level);
 
