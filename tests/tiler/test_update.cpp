@@ -226,11 +226,13 @@ TEST_CASE("build --update after a DEM is added, replaced or removed equals a ful
     }
 }
 
-TEST_CASE("a DEM finer than all before moves no zoom's eps; the update adding it equals a full "
+TEST_CASE("a DEM finer than all before leaves the eps ladder; the update adding it equals a full "
           "build and makes fewer tiles") {
     // The eps ladder follows the lattice (eps(z) = e0 / 2^z), so deepening the pyramid leaves
-    // every zoom's eps: a 0.8 degree cell with a finer block (a collection), then a block finer
-    // still in another corner of the cell (next year's survey).
+    // every zoom's ladder: a 0.8 degree cell with a finer block (a collection), then a block finer
+    // still in another corner of the cell (next year's survey). Only a zoom whose eps is raised
+    // to its reach may move, where the new DEM's blocks are rougher per lattice step than those
+    // before: here the coarsest, whose four tiles' median the survey's tile sets.
     ScratchDir dir;
     const std::string a = cell_a(dir), c = finer_block_c(dir);
     const std::string f = write_dem(dir.file("f.tif"), 8.55, 46.9, 81, 81, 0.02 / 80, 6);
@@ -244,7 +246,12 @@ TEST_CASE("a DEM finer than all before moves no zoom's eps; the update adding it
     check_same_as_full({a, c, f}, out, fresh, build(options({a, c, f}, out), true));
     const std::vector<double> after = eps_of();
     REQUIRE(after.size() == before.size() + 2); // f's two deeper zooms
-    CHECK(std::equal(before.begin(), before.end(), after.begin()));
+    for (std::size_t k = 1; k < after.size(); ++k) {
+        CAPTURE(k);
+        CHECK(after[k] == after.back() * std::exp2(double(after.size() - 1 - k))); // the ladder
+        CHECK((k >= before.size() || after[k] == before[k]));
+    }
+    CHECK(after[0] >= before[0]);
 }
 
 TEST_CASE("an update after which two grids swap rank (a file of one listed before the other's) "

@@ -178,11 +178,12 @@ LayerPlan::LayerPlan(const LayerOptions& options, const DemSource& source)
     warn_overlaps(source_, options_, max_zoom_, finest_eps_);
 }
 
-// The ladder, finest_eps * 2^(max_zoom - z), raised where the summary shows a zoom's cells
-// to be rougher than that (kReachShare of its reach).
+// The ladder, finest_eps * 2^(max_zoom - z), raised where the summary (a collection's: its
+// members') shows a zoom's cells to be rougher than that (kReachShare of its reach).
 double LayerPlan::eps_for_zoom(int z) const {
     const double ladder = finest_eps_ * std::ldexp(1.0, max_zoom_ - z);
-    if (!summary_ok_ || z < 0 || z >= max_zoom_ || zoom_source(z) == ZoomSource::Pixels) {
+    if (!(summary_ok_ || members_) || z < 0 || z >= max_zoom_ ||
+        zoom_source(z) == ZoomSource::Pixels) {
         return ladder;
     }
     const double r = reach()[static_cast<std::size_t>(z)];
@@ -363,14 +364,17 @@ double LayerPlan::relief() const {
     return std::max(max_height_ - kGeoidLowest, kGeoidHighest - min_height_);
 }
 
-// zoom_reach of every zoom 0..max_zoom - 1 (0 where a zoom reads pixels), made no smaller
+// zoom_reach of every zoom 0..max_zoom - 1 (0 where a zoom reads pixels; a collection's from
+// its members' summaries), made no smaller
 // toward coarser zooms, so that eps never shrinks from one zoom to the next coarser one.
 const std::vector<double>& LayerPlan::reach() const {
     std::call_once(reach_once_, [this] {
         reach_.assign(static_cast<std::size_t>(max_zoom_) + 1, 0.0);
         for (int z = max_zoom_ - 1; z >= 0; --z) {
             const auto k = static_cast<std::size_t>(z);
-            if (zoom_source(z) != ZoomSource::Pixels) {
+            if (members_) {
+                reach_[k] = members_->zoom_reach(z);
+            } else if (zoom_source(z) != ZoomSource::Pixels) {
                 reach_[k] = zoom_reach(summary(), *place_, options_.scheme, z, options_.tile_size);
             }
             reach_[k] = std::max(reach_[k], reach_[k + 1]);
@@ -380,8 +384,8 @@ const std::vector<double>& LayerPlan::reach() const {
 }
 
 void LayerPlan::prepare() const {
-    if (summary_ok_) {
-        reach(); // and the summary it reads
+    if (summary_ok_ || members_) {
+        reach(); // and the summaries it reads
     }
     if (members_) {
         members_->prepare(std::min(min_zoom_, terrain_min_zoom_), max_zoom_);

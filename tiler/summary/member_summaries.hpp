@@ -62,6 +62,12 @@ public:
     // Loads or makes now the summary of every member that a zoom of z0..z1 reads.
     void prepare(int z0, int z1) const;
 
+    // zoom_reach of the collection at zoom z (of the layer's scheme and tile size): each tile's
+    // roughest block among the summaries of the members that read one at some zoom, the median
+    // over those tiles (summary_tile.hpp). A lower member's blocks count where a higher one wins
+    // too, as the tiles are judged against them.
+    double zoom_reach(int z) const;
+
 private:
     struct Member {
         std::shared_ptr<const DemSource> source;

@@ -69,9 +69,22 @@ int summary_level(const DemSummary& summary, double pixels_per_step) {
 
 double
 zoom_reach(const DemSummary& summary, const PixelPlace& place, Scheme scheme, int z, int size) {
+    TileRoughness roughest;
+    add_roughness(summary, place, scheme, z, size, roughest);
+    return median_roughness(roughest);
+}
+
+void add_roughness(const DemSummary& summary,
+                   const PixelPlace& place,
+                   Scheme scheme,
+                   int z,
+                   int size,
+                   TileRoughness& roughest) {
     const double step = place.pixels_per_step(scheme, z, size);
     const int level = std::max(summary_level(summary, step), summary.finest_level());
-    const double scale = step / std::exp2(level);
+    // Scaled to a lattice step, but no further than the whole source: a source narrower than a
+    // step (its one coarsest block) has no relief beyond its own.
+    const double scale = std::min(step, std::exp2(summary.coarsest_level())) / std::exp2(level);
     // Each block's middle pixel, moved to lon/lat all at once.
     std::vector<double> lons, lats, roughness;
     for (std::int64_t by = 0; by < summary.blocks_down(level); ++by) {
@@ -87,7 +100,6 @@ zoom_reach(const DemSummary& summary, const PixelPlace& place, Scheme scheme, in
         }
     }
     place.to_lonlat(lons, lats);
-    std::map<std::pair<std::int64_t, std::int64_t>, double> roughest; // per tile (x, y)
     for (std::size_t k = 0; k < lons.size(); ++k) {
         constexpr double kPoint = 1e-9; // degrees: a box around the point, inside one tile
         const double lon = lons[k], lat = lats[k];
@@ -102,6 +114,9 @@ zoom_reach(const DemSummary& summary, const PixelPlace& place, Scheme scheme, in
         double& rough = roughest[{r.x0, r.y0}];
         rough = std::max(rough, roughness[k]);
     }
+}
+
+double median_roughness(const TileRoughness& roughest) {
     if (roughest.empty()) {
         return 0.0;
     }

@@ -9,6 +9,8 @@
 #include "tiler/summary/pixel_place.hpp"
 
 #include <cstdint>
+#include <map>
+#include <utility>
 #include <vector>
 
 namespace tb::tiler {
@@ -31,6 +33,18 @@ int summary_level(const DemSummary& summary, double pixels_per_step);
 // the published bound cannot show.
 double
 zoom_reach(const DemSummary& summary, const PixelPlace& place, Scheme scheme, int z, int size);
+
+// The roughest block of each tile (x, y), as zoom_reach finds them, of one summary or several
+// (a collection's members: merged, each tile keeping its roughest of all).
+using TileRoughness = std::map<std::pair<std::int64_t, std::int64_t>, double>;
+void add_roughness(const DemSummary& summary,
+                   const PixelPlace& place,
+                   Scheme scheme,
+                   int z,
+                   int size,
+                   TileRoughness& roughest);
+// The median over the tiles (0 with none): the zoom's reach.
+double median_roughness(const TileRoughness& roughest);
 
 // The lattice points (column0 + i, row0 + j) of (scheme, z, size), as DemSource::sample gives
 // them, each the plane of the block it lies in: heights in the source's datum (EGM96 sources: the
