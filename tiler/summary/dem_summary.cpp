@@ -222,12 +222,13 @@ void add_undulation(std::vector<double>& px,
             }
             continue;
         }
-        lon.resize(static_cast<std::size_t>(width));
-        lat.assign(static_cast<std::size_t>(width), static_cast<double>(row0 + j));
-        for (int i = 0; i < width; ++i) {
-            lon[static_cast<std::size_t>(i)] = static_cast<double>(column0 + i);
-        }
-        place.to_lonlat(lon, lat);
+        place.row_to_lonlat(static_cast<double>(column0),
+                            1.0,
+                            static_cast<double>(row0 + j),
+                            width,
+                            place.fine_span(),
+                            lon,
+                            lat);
         for (int i = 0; i < width; ++i) {
             const auto k = static_cast<std::size_t>(i);
             if (!std::isnan(row[i])) {

@@ -24,6 +24,42 @@ PixelPlace::PixelPlace(const DemSource& source, Scheme scheme)
     serves_ = grid_ && summary_serves(*grid_, scheme);
     width_ = source.info().width;
     height_ = source.info().height;
+    const double metres = source.info().resolution_m;
+    fine_span_ = metres > 0 ? std::clamp(std::floor(80 / metres), 1.0, 8.0) : 1.0;
+}
+
+void PixelPlace::row_to_lonlat(double i0,
+                               double di,
+                               double j,
+                               int n,
+                               double span,
+                               std::vector<double>& lon,
+                               std::vector<double>& lat) const {
+    const int s = grid_ ? 1 : std::max(1, static_cast<int>(std::floor(span / di)));
+    std::vector<int> at; // the points moved through the CRS
+    for (int k = 0; k < n; k += s) {
+        at.push_back(k);
+    }
+    if (at.empty() || at.back() != n - 1) {
+        at.push_back(n - 1);
+    }
+    std::vector<double> x(at.size()), y(at.size(), j);
+    for (std::size_t q = 0; q < at.size(); ++q) {
+        x[q] = i0 + at[q] * di;
+    }
+    to_lonlat(x, y);
+    lon.resize(static_cast<std::size_t>(n));
+    lat.resize(static_cast<std::size_t>(n));
+    for (std::size_t q = 0; q < at.size(); ++q) {
+        const int k0 = at[q], k1 = q + 1 < at.size() ? at[q + 1] : k0;
+        for (int k = k0; k < std::max(k1, k0 + 1); ++k) {
+            const double f = k1 > k0 ? static_cast<double>(k - k0) / (k1 - k0) : 0.0;
+            lon[static_cast<std::size_t>(k)] =
+                q + 1 < at.size() ? x[q] + f * (x[q + 1] - x[q]) : x[q];
+            lat[static_cast<std::size_t>(k)] =
+                q + 1 < at.size() ? y[q] + f * (y[q + 1] - y[q]) : y[q];
+        }
+    }
 }
 
 double PixelPlace::pixels_per_step(Scheme scheme, int z, int size) const {

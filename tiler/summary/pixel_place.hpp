@@ -48,6 +48,20 @@ public:
     void to_lonlat(std::vector<double>& x, std::vector<double>& y) const;
     void to_pixels(std::vector<double>& x, std::vector<double>& y) const;
 
+    // Lon/lat of the n points (i0 + k di, j), k = 0 .. n - 1, along one pixel row: moved through
+    // the CRS at every s-th point and the last, s the most that keeps them within `span` pixels
+    // of each other, and linear between (exact on an axis-aligned grid). A map projection bends
+    // by about span^2 / (8 R) between them: 0.1 mm over 80 m.
+    void row_to_lonlat(double i0,
+                       double di,
+                       double j,
+                       int n,
+                       double span,
+                       std::vector<double>& lon,
+                       std::vector<double>& lat) const;
+    // The span that keeps the bend under 0.1 mm: 80 m of pixels, 1 to 8 of them.
+    double fine_span() const { return fine_span_; }
+
     // What a stored summary's key says of the place (summary_file.hpp).
     std::string key() const;
 
@@ -56,6 +70,7 @@ private:
     std::optional<PixelGrid> grid_;
     bool serves_ = false;
     int width_ = 0, height_ = 0;
+    double fine_span_ = 1;
 };
 
 } // namespace tb::tiler

@@ -85,34 +85,37 @@ void add_roughness(const DemSummary& summary,
     // Scaled to a lattice step, but no further than the whole source: a source narrower than a
     // step (its one coarsest block) has no relief beyond its own.
     const double scale = std::min(step, std::exp2(summary.coarsest_level())) / std::exp2(level);
-    // Each block's middle pixel, moved to lon/lat all at once.
-    std::vector<double> lons, lats, roughness;
+    // Each block's middle, row by row, through the CRS every 512 pixels (which tile a block
+    // falls in is all that is asked: a bend of metres there moves none but a few at tile edges).
+    const std::int64_t across = summary.blocks_across(level);
+    const std::int64_t side = std::int64_t{1} << level;
+    const auto middle = [&](std::int64_t bx) { // of its columns, as in whole pixels
+        return static_cast<double>(((bx << level) + summary.last_column(level, bx)) / 2);
+    };
+    std::vector<double> lons, lats;
     for (std::int64_t by = 0; by < summary.blocks_down(level); ++by) {
-        for (std::int64_t bx = 0; bx < summary.blocks_across(level); ++bx) {
+        const double j = static_cast<double>(((by << level) + summary.last_row(level, by)) / 2);
+        place.row_to_lonlat(middle(0), double(side), j, static_cast<int>(across), 512, lons, lats);
+        if (middle(across - 1) != middle(0) + static_cast<double>((across - 1) * side)) {
+            std::vector<double> x{middle(across - 1)}, y{j}; // a narrower last block
+            place.to_lonlat(x, y);
+            lons.back() = x[0], lats.back() = y[0];
+        }
+        for (std::int64_t bx = 0; bx < across; ++bx) {
             const SummaryBlock* b = summary.block(level, bx, by);
-            if (b == nullptr || b->empty()) {
+            const double lon = lons[static_cast<std::size_t>(bx)];
+            const double lat = lats[static_cast<std::size_t>(bx)];
+            if (b->empty() || std::isnan(lon)) {
                 continue;
             }
-            lons.push_back(
-                static_cast<double>(((bx << level) + summary.last_column(level, bx)) / 2));
-            lats.push_back(static_cast<double>(((by << level) + summary.last_row(level, by)) / 2));
-            roughness.push_back((static_cast<double>(b->high) - b->low) * scale);
+            constexpr double kPoint = 1e-9; // degrees: a box around the point, inside one tile
+            const TileRange r =
+                tiles_covering(scheme, {lon - kPoint, lat - kPoint, lon + kPoint, lat + kPoint}, z);
+            if (!r.empty()) {
+                double& rough = roughest[{r.x0, r.y0}];
+                rough = std::max(rough, (static_cast<double>(b->high) - b->low) * scale);
+            }
         }
-    }
-    place.to_lonlat(lons, lats);
-    for (std::size_t k = 0; k < lons.size(); ++k) {
-        constexpr double kPoint = 1e-9; // degrees: a box around the point, inside one tile
-        const double lon = lons[k], lat = lats[k];
-        const TileRange r =
-            std::isnan(lon)
-                ? TileRange{}
-                : tiles_covering(
-                      scheme, {lon - kPoint, lat - kPoint, lon + kPoint, lat + kPoint}, z);
-        if (r.empty()) {
-            continue;
-        }
-        double& rough = roughest[{r.x0, r.y0}];
-        rough = std::max(rough, roughness[k]);
     }
 }
 
