@@ -527,46 +527,124 @@ std::size_t check_pixels_in_cells(const std::string& path,
 
 } // namespace
 
-TEST_CASE("a summary of a grid turned against the tiles (polar stereographic, 1 km pixels): "
-          "every valid pixel lies in a cell of its tile, within the cell's range of its "
-          "reference, at coarse and fine levels") {
-    tb_test::ScratchDir dir;
+namespace {
+
+// A steep plane of `per_column` and `per_row` metres per pixel (its blocks have no range: the
+// stray alone must hold it), with a void and a one-pixel ridge of 80 m along the diagonal.
+tb_test::Fixture steep_plane(int n, double per_column, double per_row) {
     tb_test::Fixture f;
-    f.width = f.height = 600;
+    f.width = f.height = n;
     f.type = GDT_Float32;
     f.nodata = -9999;
-    f.epsg = 3413; // NSIDC sea ice polar stereographic north
-    f.geotransform = std::array<double, 6>{0, 1000, 0, -1200000, 0, -1000};
-    for (int j = 0; j < f.height; ++j) {
-        for (int i = 0; i < f.width; ++i) {
-            // A steep plane (its blocks have no range: the stray alone must hold it), with a
-            // void and a ridge.
-            const bool hole = std::hypot(i - 200, j - 400) < 50;
-            f.values.push_back(hole ? -9999 : 1000 + 5.0 * i - 3.0 * j + (i == j ? 80 : 0));
+    for (int j = 0; j < n; ++j) {
+        for (int i = 0; i < n; ++i) {
+            const bool hole = std::hypot(i - n / 3, j - 2 * n / 3) < n / 12;
+            f.values.push_back(hole ? -9999
+                                    : 1000 + per_column * i - per_row * j + (i == j ? 80 : 0));
         }
     }
-    const std::string path = tb_test::write_fixture(dir.file("polar.tif"), f);
+    return f;
+}
+
+// Checks every valid pixel of the fixture against the cells of each tile over it at each
+// (zoom, level) of `scheme`: how many were checked, and the largest half-range of a cell.
+std::pair<std::size_t, double>
+judge_cells(const std::string& path, Scheme scheme, const std::vector<std::pair<int, int>>& zooms) {
     const auto source = DemSource::open({path});
-    const PixelPlace place(*source, Scheme::Geodetic);
+    const PixelPlace place(*source, scheme);
     REQUIRE_FALSE(place.serves());
     const DemSummary s = DemSummary::build(*source, place, VerticalDatum::Ellipsoid);
-    const std::vector<double> px = source->read_pixels(0, 0, f.width, f.height);
+    const int n = source->info().width;
+    const std::vector<double> px = source->read_pixels(0, 0, n, source->info().height);
     std::size_t checked = 0;
-    for (const auto& [z, level] : {std::pair{2, 7}, std::pair{3, 6}, std::pair{4, 4}}) {
+    double most = 0;
+    for (const auto& [z, level] : zooms) {
         CAPTURE(z);
-        const TileRange r = tiles_covering(Scheme::Geodetic, source->footprint(), z);
+        const TileRange r = tiles_covering(scheme, source->footprint(), z);
         for (std::int64_t y = r.y0; y <= r.y1; ++y) {
             for (std::int64_t x = r.x0; x <= r.x1; ++x) {
                 TileRaster raster;
                 raster.id = {z, x, y};
-                raster.scheme = Scheme::Geodetic;
-                raster.bounds = tile_bounds(Scheme::Geodetic, raster.id);
+                raster.scheme = scheme;
+                raster.bounds = tile_bounds(scheme, raster.id);
                 raster.size = 256;
                 raster.grid.width = raster.grid.height = 257;
                 const auto cells = summary_cells(s, place, raster, level);
-                checked += check_pixels_in_cells(path, px, f.width, raster, cells);
+                for (const CheckCell& c : cells) {
+                    most = std::max(most, c.half);
+                }
+                checked += check_pixels_in_cells(path, px, n, raster, cells);
             }
         }
     }
-    CHECK(checked > 3 * 300000);
+    return {checked, most};
+}
+
+} // namespace
+
+TEST_CASE("a summary of a grid turned against the tiles: every valid pixel lies in a cell of its "
+          "tile, within the cell's range of its reference, at coarse and fine levels (polar "
+          "stereographic north and south, the pole inside; lon/lat on the equator under "
+          "mercator tiles)") {
+    tb_test::ScratchDir dir;
+    // 1 km pixels north of Greenland (NSIDC sea ice polar stereographic north).
+    tb_test::Fixture north = steep_plane(600, 5, 3);
+    north.epsg = 3413;
+    north.geotransform = std::array<double, 6>{0, 1000, 0, -1200000, 0, -1000};
+    const auto [n1, h1] = judge_cells(tb_test::write_fixture(dir.file("north.tif"), north),
+                                      Scheme::Geodetic,
+                                      {{2, 7}, {3, 6}, {4, 4}});
+    CHECK(n1 > 3 * 300000);
+    MESSAGE("north: " << n1 << " pixels, largest half-range " << h1 << " m");
+    // 10 km pixels around the South Pole (Antarctic polar stereographic): the pole lies inside.
+    tb_test::Fixture south = steep_plane(400, 5, 3);
+    south.epsg = 3031;
+    south.geotransform = std::array<double, 6>{-2000000, 10000, 0, 2000000, 0, -10000};
+    const std::string south_path = tb_test::write_fixture(dir.file("south.tif"), south);
+    CHECK(DemSource::open({south_path})->footprint().south == -90);
+    const auto [n2, h2] = judge_cells(south_path, Scheme::Geodetic, {{1, 6}, {2, 5}, {3, 4}});
+    CHECK(n2 > 3 * 150000);
+    MESSAGE("south: " << n2 << " pixels, largest half-range " << h2 << " m");
+    // 3" lon/lat pixels under mercator tiles, a level-10 block centred on the equator, where
+    // mercator's bend is a cubic the half-block grid does not see.
+    tb_test::Fixture equator = steep_plane(2048, 3, 2);
+    equator.epsg = 4326;
+    equator.geotransform = std::array<double, 6>{10.0, 1.0 / 1200, 0, 512.0 / 1200, 0, -1.0 / 1200};
+    const auto [n3, h3] = judge_cells(tb_test::write_fixture(dir.file("equator.tif"), equator),
+                                      Scheme::Mercator,
+                                      {{3, 10}, {6, 7}});
+    CHECK(n3 > 2 * 4000000);
+    MESSAGE("equator: " << n3 << " pixels, largest half-range " << h3 << " m");
+}
+
+TEST_CASE("pixel rows moved to lon/lat by interpolation match each pixel moved through the CRS, "
+          "across the antimeridian too") {
+    tb_test::ScratchDir dir;
+    // 30 m pixels of UTM 60S around 17 S, from 178.9 E across 180 to 179.6 W.
+    tb_test::Fixture f = steep_plane(2000, 0.1, 0.1);
+    f.epsg = 32760;
+    f.geotransform = std::array<double, 6>{810000, 30, 0, 8120000, 0, -30};
+    const auto source = DemSource::open({tb_test::write_fixture(dir.file("utm60.tif"), f)});
+    const PixelPlace place(*source, Scheme::Geodetic);
+    REQUIRE(place.fine_span() > 1);
+    double worst = 0;
+    bool crossed = false;
+    for (const int j : {0, 999, 1999}) {
+        std::vector<double> lon, lat;
+        place.row_to_lonlat(0, 1, j, f.width, place.fine_span(), lon, lat);
+        std::vector<double> x(static_cast<std::size_t>(f.width)), y(x.size(), j);
+        for (std::size_t i = 0; i < x.size(); ++i) {
+            x[i] = static_cast<double>(i);
+        }
+        place.to_lonlat(x, y);
+        for (std::size_t i = 0; i < x.size(); ++i) {
+            crossed = crossed || (i > 0 && x[i] < x[i - 1]);
+            const double dlon = std::remainder(lon[i] - x[i], 360.0);
+            worst = std::max({worst, std::abs(dlon), std::abs(lat[i] - y[i])});
+            CHECK(lon[i] >= -180);
+            CHECK(lon[i] <= 180);
+        }
+    }
+    CHECK(crossed);
+    CHECK(worst < 1e-9); // degrees: 0.1 mm
 }

@@ -373,7 +373,9 @@ const std::vector<double>& LayerPlan::reach() const {
         for (int z = max_zoom_ - 1; z >= 0; --z) {
             const auto k = static_cast<std::size_t>(z);
             if (members_) {
-                reach_[k] = members_->zoom_reach(z);
+                // Only the summaries a served zoom reads (prepare makes those).
+                const int coarsest = std::min(min_zoom_, terrain_min_zoom_);
+                reach_[k] = z >= coarsest ? members_->zoom_reach(z, coarsest) : 0.0;
             } else if (zoom_source(z) != ZoomSource::Pixels) {
                 reach_[k] = zoom_reach(summary(), *place_, options_.scheme, z, options_.tile_size);
             }

@@ -355,6 +355,21 @@ private:
             throw InputError(info_.path + ": its extent does not transform to lon/lat; check "
                                           "the CRS and geotransform");
         }
+        // A pole inside the pixel-centre hull (a polar stereographic DEM of Antarctica): the
+        // outline never reaches it, but the data does, at every longitude.
+        std::unique_ptr<OGRCoordinateTransformation> back(
+            OGRCreateCoordinateTransformation(&wgs84, &srs_));
+        for (const double pole : {-90.0, 90.0}) {
+            double x = 0, y = pole;
+            if (back && back->Transform(1, &x, &y) && std::isfinite(x) && std::isfinite(y)) {
+                const double u = inverse_[0] + x * inverse_[1] + y * inverse_[2];
+                const double v = inverse_[3] + x * inverse_[4] + y * inverse_[5];
+                if (u >= u0 && u <= u1 && v >= v0 && v <= v1) {
+                    west = -180, east = 180;
+                    (pole < 0 ? south : north) = pole;
+                }
+            }
+        }
         footprint_ = {std::max(west, -180.0),
                       std::max(south, -90.0),
                       std::min(east, 180.0),

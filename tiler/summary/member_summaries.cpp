@@ -65,10 +65,10 @@ void MemberSummaries::prepare(int z0, int z1) const {
     }
 }
 
-double MemberSummaries::zoom_reach(int z) const {
+double MemberSummaries::zoom_reach(int z, int coarsest) const {
     TileRoughness roughest;
     for (std::size_t m = 0; m < members_.size(); ++m) {
-        if (reads_summary(m, 0)) { // zoom 0 reads it if any zoom does
+        if (reads_summary(m, coarsest)) {
             const Member& member = *members_[m];
             add_roughness(
                 summary(member), *member.place, options_.scheme, z, options_.tile_size, roughest);

@@ -63,10 +63,11 @@ public:
     void prepare(int z0, int z1) const;
 
     // zoom_reach of the collection at zoom z (of the layer's scheme and tile size): each tile's
-    // roughest block among the summaries of the members that read one at some zoom, the median
-    // over those tiles (summary_tile.hpp). A lower member's blocks count where a higher one wins
-    // too, as the tiles are judged against them.
-    double zoom_reach(int z) const;
+    // roughest block among the summaries of the members that zoom `coarsest` reads (the layer's
+    // coarsest zoom: those a served zoom makes), the median over those tiles
+    // (summary_tile.hpp). A lower member's blocks count where a higher one wins too, as the
+    // tiles are judged against them.
+    double zoom_reach(int z, int coarsest) const;
 
 private:
     struct Member {

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <sstream>
+#include <utility>
 
 namespace tb::tiler {
 
@@ -48,6 +49,18 @@ void PixelPlace::row_to_lonlat(double i0,
         x[q] = i0 + at[q] * di;
     }
     to_lonlat(x, y);
+    if (s == 1) {
+        lon = std::move(x), lat = std::move(y);
+        return;
+    }
+    // Across the antimeridian, interpolate the longitude the short way round, then wrap it.
+    for (std::size_t q = 1; q < x.size(); ++q) {
+        if (x[q] - x[q - 1] > 180) {
+            x[q] -= 360;
+        } else if (x[q] - x[q - 1] < -180) {
+            x[q] += 360;
+        }
+    }
     lon.resize(static_cast<std::size_t>(n));
     lat.resize(static_cast<std::size_t>(n));
     for (std::size_t q = 0; q < at.size(); ++q) {
@@ -59,6 +72,9 @@ void PixelPlace::row_to_lonlat(double i0,
             lat[static_cast<std::size_t>(k)] =
                 q + 1 < at.size() ? y[q] + f * (y[q + 1] - y[q]) : y[q];
         }
+    }
+    for (double& v : lon) {
+        v = v > 180 ? v - 360 : v < -180 ? v + 360 : v;
     }
 }
 
@@ -117,7 +133,8 @@ std::string PixelPlace::key() const {
     for (const double v : source_->info().geotransform) {
         key << " " << v;
     }
-    key << " " << width_ << " " << height_;
+    const DemInfo& info = source_->info();
+    key << " " << width_ << " " << height_ << " " << info.crs_id << " " << info.crs_name;
     return key.str();
 }
 

@@ -11,6 +11,7 @@ namespace tb::tiler {
 namespace {
 
 using Point = std::array<double, 2>; // tile grid (column, row)
+using Probes = Point[kProbes][kProbes];
 
 // Pixel columns i0..i1 and rows j0..j1 (inclusive).
 struct PixelBox {
@@ -37,14 +38,19 @@ std::optional<PixelBox> pixels_under(const PixelPlace& place, const LonLatBox& t
     place.to_pixels(xs, ys);
     const std::int64_t W = place.width(), H = place.height();
     PixelBox out{0, 0, W - 1, H - 1};
-    if (std::none_of(xs.begin(), xs.end(), [](double v) { return std::isnan(v); })) {
+    const auto finite = [](double v) { return std::isfinite(v); };
+    if (std::all_of(xs.begin(), xs.end(), finite) && std::all_of(ys.begin(), ys.end(), finite)) {
         const double margin = std::exp2(level) + 1;
+        // Clamped as doubles first: a point far outside the raster may lie anywhere.
+        const auto pixel = [](double v, std::int64_t n) {
+            return static_cast<std::int64_t>(std::clamp(v, -1.0, static_cast<double>(n)));
+        };
         const auto [x0, x1] = std::minmax_element(xs.begin(), xs.end());
         const auto [y0, y1] = std::minmax_element(ys.begin(), ys.end());
-        out.i0 = std::max<std::int64_t>(0, static_cast<std::int64_t>(std::floor(*x0 - margin)));
-        out.j0 = std::max<std::int64_t>(0, static_cast<std::int64_t>(std::floor(*y0 - margin)));
-        out.i1 = std::min<std::int64_t>(W - 1, static_cast<std::int64_t>(std::ceil(*x1 + margin)));
-        out.j1 = std::min<std::int64_t>(H - 1, static_cast<std::int64_t>(std::ceil(*y1 + margin)));
+        out.i0 = std::max<std::int64_t>(0, pixel(std::floor(*x0 - margin), W));
+        out.j0 = std::max<std::int64_t>(0, pixel(std::floor(*y0 - margin), H));
+        out.i1 = std::min<std::int64_t>(W - 1, pixel(std::ceil(*x1 + margin), W));
+        out.j1 = std::min<std::int64_t>(H - 1, pixel(std::ceil(*y1 + margin), H));
     }
     if (out.i0 > out.i1 || out.j0 > out.j1) {
         return std::nullopt;
@@ -53,16 +59,18 @@ std::optional<PixelBox> pixels_under(const PixelPlace& place, const LonLatBox& t
 }
 
 // The pixel-edge coordinates of blocks first..last of `level` along an axis of n pixels: each
-// block's first edge and middle, then the last block's far edge (2 (last - first) + 3 values).
+// block's first edge and its quarters, then the last block's far edge (kProbes - 1 per block,
+// plus one).
 std::vector<double> block_edges(std::int64_t first, std::int64_t last, int level, std::int64_t n) {
     std::vector<double> out;
     for (std::int64_t b = first; b <= last; ++b) {
         const double s0 = static_cast<double>(b << level) - 0.5;
-        const double s2 = static_cast<double>(std::min((b + 1) << level, n)) - 0.5;
-        out.push_back(s0);
-        out.push_back((s0 + s2) / 2);
+        const double s4 = static_cast<double>(std::min((b + 1) << level, n)) - 0.5;
+        for (int q = 0; q < kProbes - 1; ++q) {
+            out.push_back(s0 + (s4 - s0) * q / (kProbes - 1));
+        }
         if (b == last) {
-            out.push_back(s2);
+            out.push_back(s4);
         }
     }
     return out;
@@ -89,10 +97,10 @@ CheckCell flat_cell(const DemSummary& summary,
     return c;
 }
 
-// The cell of a block whose corners, side middles and centre land at p[v][u] (u along columns,
-// v along rows; 0, 1, 2 = first edge, middle, far edge) of the tile grid, its pixel edges
+// The cell of a block whose probes land at p[v][u] of the tile grid (u along columns, v along
+// rows; 0 .. kProbes - 1 from its first edge to its far edge in equal steps), its pixel edges
 // s0..s2 and t0..t2. False when it lies outside the tile.
-bool block_cell(const Point (&p)[3][3],
+bool block_cell(const Probes& p,
                 const DemSummary& summary,
                 double s0,
                 double s2,
@@ -104,22 +112,25 @@ bool block_cell(const Point (&p)[3][3],
                 std::int64_t by,
                 const TileRaster& raster,
                 CheckCell& c) {
+    constexpr int e = kProbes - 1;
     const Point o = p[0][0];
-    const Point U{p[0][2][0] - o[0], p[0][2][1] - o[1]}, V{p[2][0][0] - o[0], p[2][0][1] - o[1]};
-    // A(σ, τ) = o + σ U + τ V; the stray T - A at the six other points.
-    double stray[2] = {0, 0};
-    for (int v = 0; v < 3; ++v) {
-        for (int u = 0; u < 3; ++u) {
-            if (u + v == 0 || (u == 2 && v == 0) || (u == 0 && v == 2)) {
-                continue;
-            }
+    const Point U{p[0][e][0] - o[0], p[0][e][1] - o[1]}, V{p[e][0][0] - o[0], p[e][0][1] - o[1]};
+    // A(σ, τ) = o + σ U + τ V; the stray T - A: the sum over the six points of the half-block
+    // grid (a quadratic's bound), or the largest over every probe (a cubic's), with margins.
+    double sum[2] = {0, 0}, most[2] = {0, 0};
+    for (int v = 0; v <= e; ++v) {
+        for (int u = 0; u <= e; ++u) {
             for (int a = 0; a < 2; ++a) {
-                stray[a] += std::abs(p[v][u][a] - (o[a] + U[a] * u / 2 + V[a] * v / 2));
+                const double d = std::abs(p[v][u][a] - (o[a] + (U[a] * u + V[a] * v) / e));
+                most[a] = std::max(most[a], d);
+                const bool half_grid = u % 2 == 0 && v % 2 == 0;
+                sum[a] += half_grid ? d : 0.0; // the three corners A passes through add 0
             }
         }
     }
-    for (double& d : stray) {
-        d = d * kStrayMargin + 1e-9;
+    double stray[2];
+    for (int a = 0; a < 2; ++a) {
+        stray[a] = std::max(sum[a] * kStrayMargin, most[a] * kProbeMargin) + 1e-9;
     }
     const double xs[4] = {o[0], o[0] + U[0], o[0] + V[0], o[0] + U[0] + V[0]};
     const double ys[4] = {o[1], o[1] + U[1], o[1] + V[1], o[1] + U[1] + V[1]};
@@ -164,6 +175,7 @@ std::vector<CheckCell> projected_cells(const DemSummary& summary,
     }
     const std::int64_t bx0 = under->i0 >> level, bx1 = under->i1 >> level;
     const std::int64_t by0 = under->j0 >> level, by1 = under->j1 >> level;
+    constexpr std::size_t kStep = kProbes - 1;
     const std::vector<double> ss = block_edges(bx0, bx1, level, place.width());
     const std::vector<double> ts = block_edges(by0, by1, level, place.height());
     std::vector<double> xs, ys;
@@ -185,12 +197,12 @@ std::vector<CheckCell> projected_cells(const DemSummary& summary,
             if (b == nullptr || b->empty()) {
                 continue;
             }
-            const auto a = static_cast<std::size_t>(2 * (bx - bx0));
-            const auto r = static_cast<std::size_t>(2 * (by - by0));
-            Point p[3][3];
+            const auto a = static_cast<std::size_t>(bx - bx0) * kStep;
+            const auto r = static_cast<std::size_t>(by - by0) * kStep;
+            Probes p;
             bool finite = true;
-            for (std::size_t v = 0; v < 3; ++v) {
-                for (std::size_t u = 0; u < 3; ++u) {
+            for (std::size_t v = 0; v <= kStep; ++v) {
+                for (std::size_t u = 0; u <= kStep; ++u) {
                     p[v][u] = grid[(r + v) * ss.size() + a + u];
                     finite = finite && std::isfinite(p[v][u][0]) && std::isfinite(p[v][u][1]);
                 }
@@ -201,9 +213,9 @@ std::vector<CheckCell> projected_cells(const DemSummary& summary,
             } else if (block_cell(p,
                                   summary,
                                   ss[a],
-                                  ss[a + 2],
+                                  ss[a + kStep],
                                   ts[r],
-                                  ts[r + 2],
+                                  ts[r + kStep],
                                   *b,
                                   level,
                                   bx,

@@ -4,13 +4,18 @@
 // ones, a rotated grid. A block's pixels then land on a slightly curved quadrilateral of the tile's
 // grid, and its plane is no longer a plane there.
 //
-// Each block is moved to the tile's grid at its corners, the middles of its sides and its centre
-// (points shared with its neighbours). The affine map A through three corners stands for the
-// true map T; T - A, measured at the other six points, bounds how far any pixel strays from
-// where A puts it, per axis: for T quadratic over the block (a map projection at a block's
-// scale, whose higher terms are smaller by about the block's width over the Earth's radius) the
-// largest |T - A| is at most the sum of the three of those values that fix the quadratic, and
-// the sum of all six, times kStrayMargin, is used. Then:
+// Each block is moved into the tile at a 5 x 5 grid of probes, its corners and quarter points
+// (shared with its neighbours). The affine map A through three corners stands for the true map
+// T, and T - A bounds how far any pixel strays from where A puts it, per axis, taken as the
+// larger of:
+//   - the sum of |T - A| at the six other points of the half-block grid (corners, side middles,
+//     centre), times kStrayMargin: for T quadratic over the block, the largest |T - A| is at most
+//     the sum of the three of those values that fix the quadratic;
+//   - the largest |T - A| over every probe, times kProbeMargin: a cubic term can vanish on the
+//     half-block grid (mercator's y(lat) is odd about the equator) but not at the quarter points,
+//     and along a side a cubic's largest value exceeds its quarter points' by at most 1.094.
+// A map projection's higher terms are smaller again by about the block's width over the Earth's
+// radius. Then:
 //   - the cell's box is A's parallelogram widened by that stray, cut to the tile;
 //   - its reference is the block's plane carried through A's inverse, and its half-range is the
 //     block's plus how far the plane moves over the stray.
@@ -25,8 +30,10 @@
 
 namespace tb::tiler {
 
-// The stray measured at six points of a block, summed, times this.
+// Probes per side of a block, and the margins on the two measures of its stray (above).
+inline constexpr int kProbes = 5;
 inline constexpr double kStrayMargin = 1.25;
+inline constexpr double kProbeMargin = 1.5;
 
 // The blocks of `level` that may hold valid pixel centres inside the tile of `raster` (a lattice
 // raster), in raster's grid coordinates. Their pixels are found from the tile's lon/lat box
