@@ -39,12 +39,17 @@ std::string describe(const tiler::DemInfo& d) {
         out << "none\n";
     }
     if (d.scale != 1.0 || d.offset != 0.0) {
-        out << "  scale:       " << d.scale << ", offset " << d.offset << "\n";
+        out << "  scale:       " << d.scale << ", offset " << d.offset
+            << (d.metres_per_unit != 1.0 ? " (to metres)\n" : "\n");
     }
     out << "  heights:     ";
     if (d.has_data) {
-        out << d.min_height << " .. " << d.max_height
-            << (d.range_exact ? "\n" : " (approximate: too large to read whole)\n");
+        out << d.min_height << " .. " << d.max_height << " m";
+        if (d.metres_per_unit != 1.0) {
+            out << " (the file's unit: " << d.height_unit << ", " << d.metres_per_unit
+                << " m each)";
+        }
+        out << (d.range_exact ? "\n" : " (approximate: too large to read whole)\n");
     } else {
         out << "no valid sample (every sample is nodata)\n";
     }

@@ -615,3 +615,75 @@ TEST_CASE("files of one mosaic that overlap and differ by more than eps there ge
     CHECK(other.err.find(differ + " wins where both have data, being given first") !=
           std::string::npos);
 }
+
+namespace {
+
+// A 40 x 40 Int16 DEM of 3" pixels at (west, 46.0), heights 1000 + column + row in its own
+// unit: `unit` as band 1's unit type when given, `crs` as its CRS.
+std::string feet_dem(const std::string& path, double west, const char* unit, const char* crs) {
+    Fixture f;
+    f.width = f.height = 40;
+    f.type = GDT_Int16;
+    for (int j = 0; j < f.height; ++j) {
+        for (int i = 0; i < f.width; ++i) {
+            f.values.push_back(1000 + i + j);
+        }
+    }
+    f.geotransform = std::array<double, 6>{west, 1.0 / 1200, 0, 46.0, 0, -1.0 / 1200};
+    f.epsg = 4326;
+    tb_test::write_fixture(path, f);
+    GDALDatasetUniquePtr ds(GDALDataset::Open(path.c_str(), GDAL_OF_RASTER | GDAL_OF_UPDATE));
+    REQUIRE(ds != nullptr);
+    if (unit != nullptr) {
+        REQUIRE(ds->GetRasterBand(1)->SetUnitType(unit) == CE_None);
+    }
+    if (crs != nullptr) {
+        OGRSpatialReference srs;
+        REQUIRE(srs.SetFromUserInput(crs) == OGRERR_NONE);
+        REQUIRE(ds->SetSpatialRef(&srs) == CE_None);
+    }
+    return path;
+}
+
+} // namespace
+
+TEST_CASE("heights in feet are read as metres: by band 1's unit or the vertical CRS's, in one "
+          "file, a mosaic of such files and a collection beside a DEM in metres") {
+    ScratchDir dir;
+    const double ft = 0.3048, us_ft = 1200.0 / 3937;
+    const std::string a = feet_dem(dir.file("a.tif"), 7.0, "ft", nullptr);
+    using tb::tiler::DemSource;
+    const auto one = DemSource::open({a});
+    CHECK(one->info().height_unit == "ft");
+    CHECK(one->info().min_height == doctest::Approx(1000 * ft));
+    CHECK(one->info().max_height == doctest::Approx(1078 * ft));
+    CHECK(one->read_pixels(3, 5, 1, 1)[0] == doctest::Approx(1008 * ft));
+    // NAVD88 height in US survey feet as the CRS's vertical part, no unit on the band.
+    const std::string v = feet_dem(dir.file("v.tif"), 7.0, nullptr, "EPSG:4326+6360");
+    const auto vertical = DemSource::open({v});
+    CHECK(vertical->info().metres_per_unit == doctest::Approx(us_ft));
+    CHECK(vertical->read_pixels(3, 5, 1, 1)[0] == doctest::Approx(1008 * us_ft));
+    // Two files of one grid side by side: one mosaic, read in metres once, not twice.
+    const std::string b = feet_dem(dir.file("b.tif"), 7.0 + 40.0 / 1200, "ft", nullptr);
+    const auto mosaic = DemSource::open({a, b});
+    REQUIRE(mosaic->members().empty());
+    CHECK(mosaic->info().width == 80);
+    CHECK(mosaic->info().max_height == doctest::Approx(1078 * ft));
+    CHECK(mosaic->read_pixels(43, 5, 1, 1)[0] == doctest::Approx(1008 * ft));
+    // A metre DEM of another grid over the same place: the collection's heights agree.
+    Fixture m;
+    m.width = m.height = 20;
+    m.type = GDT_Float32;
+    for (int j = 0; j < m.height; ++j) {
+        for (int i = 0; i < m.width; ++i) {
+            m.values.push_back((1000 + 2 * i + 0.5 + 2 * j + 0.5) * ft);
+        }
+    }
+    m.geotransform = std::array<double, 6>{7.0, 1.0 / 600, 0, 46.0, 0, -1.0 / 600};
+    m.epsg = 4326;
+    const std::string metres = tb_test::write_fixture(dir.file("m.tif"), m);
+    const auto both = DemSource::open({metres, a});
+    REQUIRE(both->members().size() == 2);
+    CHECK(both->info().min_height > 300);
+    CHECK(both->info().max_height < 1080 * ft);
+}

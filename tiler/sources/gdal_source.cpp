@@ -9,6 +9,7 @@
 #include <ogr_spatialref.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -16,6 +17,7 @@
 #include <filesystem>
 #include <mutex>
 #include <unistd.h>
+#include <utility>
 #include <vector>
 
 namespace tb::tiler {
@@ -308,6 +310,67 @@ struct Described {
     DemInfo info;
 };
 
+// Metres per unit of a length named as GDAL and its drivers name them, or 0 when it names none.
+double metres_per(std::string unit) {
+    std::transform(unit.begin(), unit.end(), unit.begin(), [](unsigned char c) {
+        return c == '_' || c == '-' ? ' ' : static_cast<char>(std::tolower(c));
+    });
+    static const std::pair<const char*, double> kUnits[] = {
+        {"m", 1},
+        {"metre", 1},
+        {"meter", 1},
+        {"metres", 1},
+        {"meters", 1},
+        {"ft", 0.3048},
+        {"foot", 0.3048},
+        {"feet", 0.3048},
+        {"international foot", 0.3048},
+        {"us ft", 1200.0 / 3937},
+        {"ftus", 1200.0 / 3937},
+        {"us survey foot", 1200.0 / 3937},
+        {"us survey feet", 1200.0 / 3937},
+        {"foot us", 1200.0 / 3937},
+        {"us foot", 1200.0 / 3937},
+        {"cm", 0.01},
+        {"centimetre", 0.01},
+        {"centimeter", 0.01},
+        {"mm", 0.001},
+        {"millimetre", 0.001},
+        {"millimeter", 0.001},
+    };
+    for (const auto& [name, metres] : kUnits) {
+        if (unit == name) {
+            return metres;
+        }
+    }
+    return 0;
+}
+
+// The unit of band 1's heights: the band's unit type, else the length unit of the CRS's
+// vertical part, else metres (DemInfo::height_unit). A unit that is not a length is a warning,
+// and metres are assumed.
+void find_height_unit(DemInfo& info, GDALRasterBand& band, const OGRSpatialReference* srs) {
+    const std::string given = band.GetUnitType() ? band.GetUnitType() : "";
+    if (!given.empty()) {
+        const double metres = metres_per(given);
+        if (metres > 0) {
+            info.height_unit = given, info.metres_per_unit = metres;
+        } else {
+            log::warn(info.path + ": band 1's unit '" + given +
+                      "' is not a length Terrabound knows; its heights are taken as metres");
+        }
+        return;
+    }
+    if (srs && (srs->IsCompound() || srs->IsVertical())) {
+        const char* name = nullptr;
+        const double metres = srs->GetTargetLinearUnits("VERT_CS", &name);
+        if (metres > 0) {
+            info.height_unit = name ? name : "";
+            info.metres_per_unit = metres;
+        }
+    }
+}
+
 // Opens `path` and describes band 1 without reading a sample (inspect_metadata).
 Described open_described(const std::string& path,
                          std::optional<double> nodata_override,
@@ -349,6 +412,10 @@ Described open_described(const std::string& path,
     if (srs) {
         describe_crs(info, *srs);
     }
+    // Heights in feet (US lidar) become metres through the scale and offset every read applies.
+    find_height_unit(info, *band, srs);
+    info.scale *= info.metres_per_unit;
+    info.offset *= info.metres_per_unit;
     if (info.has_geotransform) {
         info.resolution_m = pixel_size_m(info, srs);
     }

@@ -46,7 +46,12 @@ struct DemInfo {
     bool has_geotransform = false;
     std::array<double, 6> geotransform{0, 1, 0, 0, 0, 1};
     std::optional<double> nodata;
+    // Band 1's scale and offset, times metres_per_unit: every read gives metres.
     double scale = 1.0, offset = 0.0;
+    // The unit the file gives its heights in (band 1's unit type, or the vertical CRS's), and
+    // metres per unit; "" and 1 when it gives none (metres are assumed).
+    std::string height_unit;
+    double metres_per_unit = 1.0;
     bool has_data = false;                 // false when every sample is nodata
     double min_height = 0, max_height = 0; // over valid samples, after scale/offset
     bool range_exact = true; // min/max read from every sample, not GDAL's approximate pass

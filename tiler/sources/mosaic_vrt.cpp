@@ -161,6 +161,8 @@ std::string mosaic_vrt_xml(const std::vector<const FileScan*>& files, double nod
         band, "dataType", GDALGetDataTypeName(same_scale ? type : GDT_Float64));
     CPLAddXMLAttributeAndValue(band, "band", "1");
     CPLCreateXMLElementAndValue(band, "NoDataValue", number(nodata).c_str());
+    // Its files' scales already turn their units into metres.
+    CPLCreateXMLElementAndValue(band, "UnitType", "m");
     const DemInfo& first = files.front()->info;
     if (same_scale && (first.scale != 1.0 || first.offset != 0.0)) {
         CPLCreateXMLElementAndValue(band, "Offset", number(first.offset).c_str());
