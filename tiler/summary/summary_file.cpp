@@ -107,7 +107,9 @@ std::optional<std::string> summary_key(const std::vector<std::string>& sources,
                                        const ValidRange& range) {
     std::ostringstream key;
     key.precision(17);
-    key << "terrabound summary 1";
+    // 2: heights in feet read as metres (DemInfo::metres_per_unit), so a summary made before
+    // of such a DEM holds feet.
+    key << "terrabound summary 2";
     for (const std::string& source : sources) {
         std::error_code ec;
         const auto path = std::filesystem::absolute(source, ec);
