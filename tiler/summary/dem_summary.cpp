@@ -201,8 +201,9 @@ int summary_finest_level(std::int64_t width, std::int64_t height) {
 
 namespace {
 
-// Adds the EGM96 undulation at each pixel centre of a window: by row and column on a lon/lat
-// grid (`columns` made for it), else at each centre moved to lon/lat.
+// Adds the EGM96 undulation at each pixel centre of a window: by row and column on an
+// axis-aligned grid (`columns` made for it: a column's longitude and a row's latitude are each
+// its own), else at each centre moved to lon/lat.
 void add_undulation(std::vector<double>& px,
                     const std::string& path,
                     const PixelPlace& place,
@@ -211,12 +212,14 @@ void add_undulation(std::vector<double>& px,
                     std::int64_t row0,
                     int width,
                     int height) {
-    const std::optional<PixelGrid>& grid = place.grid();
     std::vector<double> lon, lat;
     for (int j = 0; j < height; ++j) {
         double* row = px.data() + static_cast<std::size_t>(j) * width;
-        if (grid && grid->lonlat) {
-            const Egm96Row r = egm96_row(grid->y(row0 + j));
+        if (place.grid()) {
+            lon.assign(1, static_cast<double>(column0));
+            lat.assign(1, static_cast<double>(row0 + j));
+            place.to_lonlat(lon, lat);
+            const Egm96Row r = egm96_row(lat[0]);
             for (int i = 0; i < width; ++i) {
                 row[i] += egm96_at(columns[static_cast<std::size_t>(column0 + i)], r);
             }
@@ -282,10 +285,15 @@ DemSummary::build(const DemSource& source, const PixelPlace& place, VerticalDatu
               std::to_string(s.height_) + " pixels, blocks of " + std::to_string(1 << s.finest_) +
               " pixels and up)");
     std::vector<Egm96Column> columns;
-    if (datum == VerticalDatum::Egm96 && place.grid() && place.grid()->lonlat) {
-        columns.resize(static_cast<std::size_t>(s.width_));
-        for (int i = 0; i < s.width_; ++i) {
-            columns[static_cast<std::size_t>(i)] = egm96_column(place.grid()->x(i));
+    if (datum == VerticalDatum::Egm96 && place.grid()) {
+        std::vector<double> lon(static_cast<std::size_t>(s.width_)), lat(lon.size(), 0.0);
+        for (std::size_t i = 0; i < lon.size(); ++i) {
+            lon[i] = static_cast<double>(i);
+        }
+        place.to_lonlat(lon, lat);
+        columns.resize(lon.size());
+        for (std::size_t i = 0; i < lon.size(); ++i) {
+            columns[i] = egm96_column(lon[i]);
         }
     }
     const int W = s.width_, H = s.height_;

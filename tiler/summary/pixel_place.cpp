@@ -63,16 +63,15 @@ void PixelPlace::row_to_lonlat(double i0,
     }
     lon.resize(static_cast<std::size_t>(n));
     lat.resize(static_cast<std::size_t>(n));
-    for (std::size_t q = 0; q < at.size(); ++q) {
-        const int k0 = at[q], k1 = q + 1 < at.size() ? at[q + 1] : k0;
-        for (int k = k0; k < std::max(k1, k0 + 1); ++k) {
-            const double f = k1 > k0 ? static_cast<double>(k - k0) / (k1 - k0) : 0.0;
-            lon[static_cast<std::size_t>(k)] =
-                q + 1 < at.size() ? x[q] + f * (x[q + 1] - x[q]) : x[q];
-            lat[static_cast<std::size_t>(k)] =
-                q + 1 < at.size() ? y[q] + f * (y[q + 1] - y[q]) : y[q];
+    for (std::size_t q = 0; q + 1 < at.size(); ++q) {
+        const int k0 = at[q], k1 = at[q + 1];
+        for (int k = k0; k < k1; ++k) {
+            const double f = static_cast<double>(k - k0) / (k1 - k0);
+            lon[static_cast<std::size_t>(k)] = x[q] + f * (x[q + 1] - x[q]);
+            lat[static_cast<std::size_t>(k)] = y[q] + f * (y[q + 1] - y[q]);
         }
     }
+    lon.back() = x.back(), lat.back() = y.back();
     for (double& v : lon) {
         v = v > 180 ? v - 360 : v < -180 ? v + 360 : v;
     }

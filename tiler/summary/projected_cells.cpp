@@ -98,8 +98,9 @@ CheckCell flat_cell(const DemSummary& summary,
 }
 
 // The cell of a block whose probes land at p[v][u] of the tile grid (u along columns, v along
-// rows; 0 .. kProbes - 1 from its first edge to its far edge in equal steps), its pixel edges
-// s0..s2 and t0..t2. False when it lies outside the tile.
+// rows; 0 .. kProbes - 1 from its first edge to its far edge in equal steps), with s0 and s2 its
+// first and far pixel edges along columns, t0 and t2 along rows. False when it lies outside the
+// tile.
 bool block_cell(const Probes& p,
                 const DemSummary& summary,
                 double s0,
